@@ -40,6 +40,7 @@ _helio_system_packages() {
     command -v cc >/dev/null || missing+=(gcc)
     command -v c++ >/dev/null || missing+=(g++)
     command -v git >/dev/null || missing+=(git)
+    command -v flock >/dev/null || missing+=(util-linux)
     if ! command -v "$python" >/dev/null; then
         missing+=(python3 python3-venv python3-dev)
     elif ! _helio_python_ok "$python"; then
@@ -148,9 +149,11 @@ _helio_build() {
         return 0
     fi
     _helio_log "colcon build"
-    (cd "$_helio_root" && colcon build \
+    # One build at a time in this checkout (a second shell waits for the first).
+    (cd "$_helio_root" && flock 9 && colcon build \
         --cmake-args -DBUILD_TESTING=ON -DPython3_EXECUTABLE="$_helio_venv/bin/python" \
-        >&2) || { _helio_die "colcon build failed (see the output above)"; return 1; }
+        >&2) 9>"$_helio_root/.helio.lock" \
+        || { _helio_die "colcon build failed (see the output above)"; return 1; }
     ls "$_helio_root/src" > "$stamp"
 }
 

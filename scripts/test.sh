@@ -1,31 +1,55 @@
 #!/usr/bin/env bash
-# Run every package's tests with colcon and report "N passed, M failed[, K skipped]".
-# Expects the workspace set up and sourced (helio.sh does that). Extra arguments go to
-# `colcon test` (e.g. --packages-select helio_optics).
+# Run the packages' tests with colcon and report "N passed, M failed[, K skipped]".
+# Expects the workspace set up and sourced (helio.sh does that).
+#
+#   test.sh                         every package
+#   test.sh helio_optics [...]      only these packages
+#   test.sh -- --pytest-args -k x   arguments after -- go to `colcon test`
 # Exit status: 0 only when at least one test ran and none failed or errored.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 
+packages=()
+while [ $# -gt 0 ] && [ "$1" != -- ]; do packages+=("$1"); shift; done
+[ "${1:-}" = -- ] && shift
+if [ ${#packages[@]} -eq 0 ]; then
+    mapfile -t packages < <(colcon list --names-only)
+fi
+
 # A private DDS domain for this run, so tests never hear another graph on this machine.
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( (RANDOM % 100) + 100 ))}"
-rm -rf "$root/build"/*/test_results "$root/build"/*/pytest.xml
 
 status=0
-colcon test --event-handlers console_cohesion+ summary+ \
-    --pytest-args -p no:cacheprovider "$@" || status=$?
+report="$(mktemp)"
+trap 'rm -f "$report"' EXIT
+(
+    flock 9   # one colcon test at a time in this checkout
+    for package in "${packages[@]}"; do
+        rm -rf "build/$package/test_results" "build/$package/pytest.xml" \
+            "build/$package/Testing"
+    done
+    colcon test --event-handlers console_cohesion+ summary+ \
+        --packages-select "${packages[@]}" --pytest-args -p no:cacheprovider "$@" || exit 1
+) 9>"$root/.helio.lock" || status=$?
 
-summary="$(colcon test-result --verbose --all 2>&1 | tee /dev/stderr | grep -E '^Summary:' | tail -n 1 || true)"
-# Summary: 42 tests, 0 errors, 1 failure, 3 skipped
-read -r total errors failures skipped < <(python3 - "$summary" <<'EOF'
+for package in "${packages[@]}"; do
+    [ -d "build/$package" ] || continue
+    colcon test-result --verbose --all --test-result-base "build/$package" 2>&1 \
+        | tee -a "$report" >&2 || true
+done
+
+read -r total errors failures skipped < <(python3 - "$report" <<'PYEOF'
 import re
 import sys
-text = sys.argv[1]
-def count(word):
-    match = re.search(r'(\d+) ' + word, text)
-    return int(match.group(1)) if match else 0
-print(count('tests?'), count('errors?'), count('failures?'), count('skipped'))
-EOF
+totals = [0, 0, 0, 0]
+for line in open(sys.argv[1]):
+    if line.startswith('Summary:'):
+        for i, word in enumerate(('tests?', 'errors?', 'failures?', 'skipped')):
+            match = re.search(r'(\d+) ' + word, line)
+            totals[i] += int(match.group(1)) if match else 0
+print(*totals)
+PYEOF
 )
 failed=$((errors + failures))
 passed=$((total - failed - skipped))
