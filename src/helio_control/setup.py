@@ -23,6 +23,7 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'demo = helio_control.demo:main',
         ],
     },
 )

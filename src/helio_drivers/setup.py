@@ -23,6 +23,9 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'dobot_driver = helio_drivers.dobot_driver_node:main',
+            'servo_driver = helio_drivers.servo_driver_node:main',
+            'sim_world = helio_drivers.sim_world_node:main',
         ],
     },
 )

@@ -23,6 +23,7 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'sun_estimator = helio_optics.sun_estimator_node:main',
         ],
     },
 )

@@ -23,6 +23,8 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'spot_detector = helio_perception.spot_detector_node:main',
+            'thermal_monitor = helio_perception.thermal_monitor_node:main',
         ],
     },
 )
