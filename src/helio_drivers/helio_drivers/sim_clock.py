@@ -1,0 +1,89 @@
+"""
+Simulated time of the world (issue 6, item 7).
+
+``SimClock`` holds the simulated time in seconds since the start of the run and the
+timezone-aware date and time that start corresponds to (for the sun). It only moves when the
+world steps, so the run is deterministic whatever the wall clock does. Calling the clock
+returns its seconds: it is the injected clock of the device emulators (their motion follows
+simulated time). ``Pacer`` keeps the simulation at a real-time factor: given the wall time
+and the simulated time it says how long to wait before the next step (0 when behind), and
+reports the factor achieved.
+"""
+
+import datetime
+import threading
+
+
+class SimClock:
+    """Simulated seconds since `start` (a timezone-aware datetime); thread-safe reads."""
+
+    def __init__(self, start, time=0.0):
+        """Start at `start` (aware datetime) plus `time` seconds."""
+        if not isinstance(start, datetime.datetime) or start.utcoffset() is None:
+            raise ValueError(f'start must be a timezone-aware datetime, got {start!r}')
+        self.start = start
+        self._time = float(time)
+        self._lock = threading.Lock()
+
+    def __call__(self):
+        """Return the simulated time [s] (the emulators' clock callable)."""
+        with self._lock:
+            return self._time
+
+    @property
+    def time(self):
+        """Return the simulated seconds since the start."""
+        return self()
+
+    def advance(self, dt):
+        """Move simulated time forward by `dt` > 0 seconds; return the new time."""
+        if not dt > 0.0:
+            raise ValueError(f'dt must be > 0 s, got {dt}')
+        with self._lock:
+            self._time += float(dt)
+            return self._time
+
+    def datetime(self):
+        """Return the aware datetime of the present simulated instant."""
+        return self.start + datetime.timedelta(seconds=self())
+
+    def nanoseconds(self):
+        """Return the simulated time as an integer count of ns (for /clock)."""
+        return int(round(self() * 1e9))
+
+
+class Pacer:
+    """
+    Hold a real-time factor between wall time and simulated time.
+
+    `real_time_factor` <= 0 means as fast as possible. If the simulation falls behind by
+    more than `max_lag` wall seconds it stops trying to catch up (the lag is dropped).
+    """
+
+    def __init__(self, real_time_factor=1.0, max_lag=0.5):
+        """Pace at `real_time_factor` simulated seconds per wall second."""
+        self.real_time_factor = float(real_time_factor)
+        self.max_lag = float(max_lag)
+        self._wall0 = None
+        self._sim0 = 0.0
+        self._first_wall = None
+        self._first_sim = 0.0
+
+    def delay(self, wall_now, sim_now):
+        """Return the wall seconds to wait before simulating past `sim_now` (0: step now)."""
+        if self._wall0 is None:
+            self._wall0, self._sim0 = wall_now, sim_now
+            self._first_wall, self._first_sim = wall_now, sim_now
+        if self.real_time_factor <= 0.0:
+            return 0.0
+        due = self._wall0 + (sim_now - self._sim0) / self.real_time_factor
+        if wall_now - due > self.max_lag:  # too far behind: restart the reference
+            self._wall0, self._sim0 = wall_now, sim_now
+            return 0.0
+        return max(0.0, due - wall_now)
+
+    def achieved(self, wall_now, sim_now):
+        """Return the real-time factor achieved since the first call (sim s per wall s)."""
+        if self._first_wall is None or wall_now <= self._first_wall:
+            return 0.0
+        return (sim_now - self._first_sim) / (wall_now - self._first_wall)

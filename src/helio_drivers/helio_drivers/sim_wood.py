@@ -1,0 +1,512 @@
+"""
+Wood panel of the simulated world: transient heat conduction and charring (issue 6, item 3).
+
+The panel lies in the ``world`` plane z = 0 (its surface), the wood below it. Heat flows
+laterally and into the depth on a 3-D finite-volume grid that is fine around the light spot
+and coarse far from it: a *patch* centred on the spot (lateral cells of ``fine_cell`` inside
+``fine_half_width``, then growing geometrically to ``half_width``; layers thin at the
+surface, growing with depth down to the panel thickness). When the spot leaves the fine
+region the patch re-centres on it (the old field is interpolated onto the new grid, outside
+it the far field is used; the energy this moves is booked as ``regrid``). Far from the spot
+the panel is a 1-D column (same layers) under the unconcentrated sunlight.
+
+Time stepping is the Douglas alternating-direction implicit scheme for backward Euler: per
+step one tridiagonal solve along each axis (LAPACK gtsv on all lines at once), so a step costs
+O(cells) and is unconditionally stable; its fixed point is the exact discrete steady state.
+Losses at the surface: convection h (T - T_a) and radiation eps sigma (T^4 - T_a^4), the
+linear part implicit, the rest of the radiation explicit; at the back, convection through the
+half bottom layer. Lateral patch sides are adiabatic (the far field has no lateral gradient).
+
+Pyrolysis: an irreversible char fraction chi per surface pixel (the raster of the whole
+panel at the fine cell size, aligned with the fine cells), first order,
+d chi / dt = (1 - chi) A exp(-E / (R T)) where T > T_p, 0 below. Char raises the solar
+absorptance: alpha = alpha_wood + (alpha_char - alpha_wood) chi. The char raster is the
+painting. Heat of pyrolysis is neglected (the paper's lens is too weak for self-sustained
+burning, Sec. IV-B3).
+
+Units: SI, temperatures in degC at the interface, K inside the radiation law.
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+from scipy.linalg import solve_banded
+
+STEFAN_BOLTZMANN = 5.670374419e-8  # [W/(m^2 K^4)]
+GAS_CONSTANT = 8.314462618         # [J/(mol K)]
+KELVIN = 273.15
+
+
+@dataclass(frozen=True)
+class WoodParameters:
+    """Material and surface values of the panel (sources in config/sim_world.yaml)."""
+
+    density: float = 545.0              # plywood [kg/m^3]
+    conductivity: float = 0.12          # across the grain [W/(m K)]
+    specific_heat: float = 1215.0       # [J/(kg K)]
+    thickness: float = 0.006            # panel thickness [m]
+    absorptance_wood: float = 0.40      # solar absorptance of light wood [-]
+    absorptance_char: float = 0.90      # solar absorptance of char [-]
+    emissivity: float = 0.90            # thermal emissivity of the surface [-]
+    convection_top: float = 10.0        # surface heat transfer coefficient [W/(m^2 K)]
+    convection_back: float = 5.0        # back face heat transfer coefficient [W/(m^2 K)]
+    ambient: float = 25.0               # air and initial panel temperature [degC]
+    pyrolysis_temperature: float = 200.0    # T_p, no charring below [degC]
+    char_preexponential: float = 1.0e9      # A of the char rate [1/s]
+    char_activation_energy: float = 1.25e5  # E of the char rate [J/mol]
+    charred_fraction: float = 0.5       # chi above which a pixel counts as charred [-]
+
+    def __post_init__(self):
+        """Reject values that describe no wood."""
+        for name in ('density', 'conductivity', 'specific_heat', 'thickness'):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f'{name} must be > 0, got {getattr(self, name)}')
+        for name in ('absorptance_wood', 'absorptance_char', 'emissivity', 'charred_fraction'):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f'{name} must be in [0, 1], got {getattr(self, name)}')
+        for name in ('convection_top', 'convection_back', 'char_preexponential',
+                     'char_activation_energy'):
+            if not getattr(self, name) >= 0.0:
+                raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
+
+    @property
+    def volumetric_heat_capacity(self):
+        """Return rho c [J/(m^3 K)]."""
+        return self.density * self.specific_heat
+
+    @property
+    def diffusivity(self):
+        """Return k / (rho c) [m^2/s]."""
+        return self.conductivity / self.volumetric_heat_capacity
+
+    @property
+    def thermal_effusivity_squared(self):
+        """Return k rho c [W^2 s/(m^4 K^2)] (the semi-infinite solid's material group)."""
+        return self.conductivity * self.volumetric_heat_capacity
+
+
+@dataclass(frozen=True)
+class GridParameters:
+    """Shape of the moving patch grid [m]."""
+
+    fine_cell: float = 2.0e-4           # lateral cell (and char pixel) size near the spot
+    fine_half_width: float = 6.0e-3     # half side of the fine square
+    half_width: float = 0.035           # half side of the whole patch
+    lateral_growth: float = 1.25        # ratio of neighbouring coarse cells
+    top_layer: float = 5.0e-5           # thickness of the surface layer
+    depth_growth: float = 1.35          # ratio of neighbouring layers
+    recentre_margin: float = 2.0e-3     # re-centre when the spot is this close to the fine edge
+
+    def __post_init__(self):
+        """Reject grids that cannot be built."""
+        if not (self.fine_cell > 0.0 and self.top_layer > 0.0):
+            raise ValueError('fine_cell and top_layer must be > 0')
+        if not self.fine_half_width >= 2.0 * self.fine_cell:
+            raise ValueError('fine_half_width must hold at least two fine cells')
+        if not self.half_width >= self.fine_half_width:
+            raise ValueError('half_width must be >= fine_half_width')
+        if not (self.lateral_growth >= 1.0 and self.depth_growth >= 1.0):
+            raise ValueError('growth ratios must be >= 1')
+        if not 0.0 <= self.recentre_margin < self.fine_half_width:
+            raise ValueError('recentre_margin must be in [0, fine_half_width)')
+
+
+def lateral_edges(grid):
+    """Cell edges of one lateral axis, relative to the patch centre: fine, then growing."""
+    n_half = max(1, int(round(grid.fine_half_width / grid.fine_cell)))
+    fine = np.arange(-n_half, n_half + 1) * grid.fine_cell
+    outer = []
+    position, width = fine[-1], grid.fine_cell
+    while position < grid.half_width - 1e-12:
+        width *= grid.lateral_growth
+        position = min(position + width, grid.half_width)
+        if grid.half_width - position < 0.3 * width:  # no sliver cell at the end
+            position = grid.half_width
+        outer.append(position)
+    outer = np.array(outer)
+    return np.concatenate([-outer[::-1], fine, outer])
+
+
+def depth_edges(grid, thickness):
+    """Layer boundaries from the surface (0) down to -thickness: thin on top, growing."""
+    edges = [0.0]
+    width = grid.top_layer
+    while edges[-1] < thickness - 1e-12:
+        bottom = min(edges[-1] + width, thickness)
+        if thickness - bottom < 0.3 * width:
+            bottom = thickness
+        edges.append(bottom)
+        width *= grid.depth_growth
+    return -np.array(edges)
+
+
+@dataclass
+class EnergyLedger:
+    """Energy that entered, left and moved through the patch since the ledger started [J]."""
+
+    absorbed: float = 0.0       # solar power absorbed at the surface, integrated
+    lost_top: float = 0.0       # convection and radiation from the surface
+    lost_back: float = 0.0      # convection from the back face
+    regrid: float = 0.0         # energy change caused by re-centring the patch
+    initial_stored: float = 0.0  # heat content above ambient when the ledger started
+
+    def residual(self, stored):
+        """Return absorbed - lost + regrid - (stored - initial): zero if energy is conserved."""
+        return (self.absorbed - self.lost_top - self.lost_back + self.regrid
+                - (stored - self.initial_stored))
+
+
+def _tridiagonal_operator(edges, diffusivity):
+    """
+    Banded form (3, n) of the 1-D conduction operator along one axis, adiabatic ends.
+
+    Row i of the operator: a / w_i * [(u_{i+1} - u_i)/d_{i+1/2} - (u_i - u_{i-1})/d_{i-1/2}]
+    with widths w and centre distances d [1/s]. Returns (lower, diagonal, upper) arrays.
+    """
+    widths = np.abs(np.diff(edges))
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    coupling = diffusivity / np.abs(np.diff(centres))   # a / d_{i+1/2}  [m/s]
+    n = len(widths)
+    lower, diagonal, upper = np.zeros(n), np.zeros(n), np.zeros(n)
+    upper[:-1] = coupling / widths[:-1]
+    lower[1:] = coupling / widths[1:]
+    diagonal[:-1] -= upper[:-1]
+    diagonal[1:] -= lower[1:]
+    return lower, diagonal, upper
+
+
+def _apply_tridiagonal(lower, diagonal, upper, values):
+    """Multiply the operator (along axis 0 of `values`) by `values`."""
+    shape = (-1,) + (1,) * (values.ndim - 1)
+    result = diagonal.reshape(shape) * values
+    result[1:] += lower[1:].reshape(shape) * values[:-1]
+    result[:-1] += upper[:-1].reshape(shape) * values[1:]
+    return result
+
+
+def _solve_shifted(lower, diagonal, upper, dt, rhs):
+    """Solve (I - dt A) x = rhs along axis 0 of rhs, for all other indices at once."""
+    n = len(diagonal)
+    banded = np.zeros((3, n))
+    banded[0, 1:] = -dt * upper[:-1]
+    banded[1] = 1.0 - dt * diagonal
+    banded[2, :-1] = -dt * lower[1:]
+    flat = rhs.reshape(n, -1)
+    return solve_banded((1, 1), banded, flat, overwrite_b=False,
+                        check_finite=False).reshape(rhs.shape)
+
+
+def bilinear_weights(centres, coordinates):
+    """
+    Linear interpolation weights on a non-uniform axis of cell centres.
+
+    Returns (index i0, weight of i0+1, inside mask); coordinates between the outer edge and
+    the outermost centre take the outermost value.
+    """
+    coordinates = np.asarray(coordinates, dtype=float)
+    index = np.clip(np.searchsorted(centres, coordinates) - 1, 0, len(centres) - 2)
+    span = centres[index + 1] - centres[index]
+    weight = np.clip((coordinates - centres[index]) / span, 0.0, 1.0)
+    return index, weight
+
+
+class WoodPanel:
+    """
+    The panel: a moving 3-D patch around the spot, a far-field column and the char raster.
+
+    ``extent`` = (x_min, x_max, y_min, y_max) of the panel surface in the world frame [m].
+    Temperatures inside are kept as rises above ambient, theta = T - T_a [K].
+    """
+
+    def __init__(self, wood=None, grid=None, extent=(-0.05, 0.20, -0.05, 0.20),
+                 centre=(0.0, 0.0)):
+        """Build the patch at `centre` (snapped to the char raster), all at ambient."""
+        self.wood = wood or WoodParameters()
+        self.grid = grid or GridParameters()
+        x_min, x_max, y_min, y_max = (float(v) for v in extent)
+        if not (x_max > x_min and y_max > y_min):
+            raise ValueError(f'panel extent must have x_max > x_min and y_max > y_min: {extent}')
+        cell = self.grid.fine_cell
+        self.raster_origin = np.array([x_min, y_min])
+        self.raster_shape = (int(math.ceil((y_max - y_min) / cell)),
+                             int(math.ceil((x_max - x_min) / cell)))
+        self.extent = (x_min, x_min + self.raster_shape[1] * cell,
+                       y_min, y_min + self.raster_shape[0] * cell)
+        self.char = np.zeros(self.raster_shape, dtype=np.float64)  # chi per surface pixel
+
+        self._lateral = lateral_edges(self.grid)
+        self._n_fine_half = int(round(self.grid.fine_half_width / cell))
+        self.z_edges = depth_edges(self.grid, self.wood.thickness)
+        self.z_widths = -np.diff(self.z_edges)
+        self.z_centres = 0.5 * (self.z_edges[:-1] + self.z_edges[1:])
+        a = self.wood.diffusivity
+        self._ops_xy = _tridiagonal_operator(self._lateral, a)
+        lower, diagonal, upper = _tridiagonal_operator(self.z_edges, a)
+        rho_c = self.wood.volumetric_heat_capacity
+        # Linear surface loss: convection plus radiation linearised at ambient (implicit).
+        t_ambient = self.wood.ambient + KELVIN
+        self._h_radiation_linear = 4.0 * self.wood.emissivity * STEFAN_BOLTZMANN * t_ambient ** 3
+        self._h_top = self.wood.convection_top + self._h_radiation_linear
+        half_bottom = 0.5 * self.z_widths[-1]
+        self._h_back = (0.0 if self.wood.convection_back == 0.0 else
+                        1.0 / (1.0 / self.wood.convection_back
+                               + half_bottom / self.wood.conductivity))
+        diagonal = diagonal.copy()
+        diagonal[0] -= self._h_top / (rho_c * self.z_widths[0])
+        diagonal[-1] -= self._h_back / (rho_c * self.z_widths[-1])
+        self._ops_z = (lower, diagonal, upper)
+
+        n_lateral = len(self._lateral) - 1
+        self.theta = np.zeros((len(self.z_widths), n_lateral, n_lateral))  # (z, y, x)
+        self.far_field = np.zeros(len(self.z_widths))                      # column theta
+        self.time = 0.0
+        self.ledger = EnergyLedger()
+        self.recentres = 0
+        self.coarse_overheat = False   # set if T_p was exceeded outside the fine region
+        self._centre = np.zeros(2)
+        self._place(self._snap(centre))
+        self._last_irradiance = np.zeros((n_lateral, n_lateral))
+        self._last_absorbed = np.zeros((n_lateral, n_lateral))
+
+    # ------------------------------------------------------------------ geometry
+    def _snap(self, point):
+        """Nearest raster corner to `point`, kept so the fine region stays on the panel."""
+        cell = self.grid.fine_cell
+        corner = np.round((np.asarray(point, dtype=float)[:2] - self.raster_origin) / cell)
+        corner[0] = np.clip(corner[0], self._n_fine_half, self.raster_shape[1] - self._n_fine_half)
+        corner[1] = np.clip(corner[1], self._n_fine_half, self.raster_shape[0] - self._n_fine_half)
+        return corner.astype(int)
+
+    def _place(self, corner):
+        """Set the patch centre to raster corner `corner` (column, row)."""
+        self._corner = corner
+        self._centre = self.raster_origin + corner * self.grid.fine_cell
+        self.x_edges = self._centre[0] + self._lateral
+        self.y_edges = self._centre[1] + self._lateral
+        self.x_centres = 0.5 * (self.x_edges[:-1] + self.x_edges[1:])
+        self.y_centres = 0.5 * (self.y_edges[:-1] + self.y_edges[1:])
+        self.cell_areas = np.outer(np.diff(self.y_edges), np.diff(self.x_edges))
+        n_outer = (len(self._lateral) - 1) // 2 - self._n_fine_half
+        self._fine = slice(n_outer, n_outer + 2 * self._n_fine_half)
+        r0, c0 = corner[1] - self._n_fine_half, corner[0] - self._n_fine_half
+        self._raster_fine = (slice(r0, r0 + 2 * self._n_fine_half),
+                             slice(c0, c0 + 2 * self._n_fine_half))
+        self._absorptance = self._column_absorptance()
+
+    @property
+    def centre(self):
+        """Return the patch centre in the world frame, (x, y) [m]."""
+        return self._centre.copy()
+
+    @property
+    def fine_bounds(self):
+        """(x_min, x_max, y_min, y_max) of the fine region [m]."""
+        f = self._fine
+        return (self.x_edges[f.start], self.x_edges[f.stop],
+                self.y_edges[f.start], self.y_edges[f.stop])
+
+    def _column_absorptance(self):
+        """Solar absorptance of each patch column from the char raster (area average)."""
+        w = self.wood
+        chi = self._raster_average(self.x_edges, self.y_edges)
+        return w.absorptance_wood + (w.absorptance_char - w.absorptance_wood) * chi
+
+    def _raster_average(self, x_edges, y_edges):
+        """Mean char fraction over each cell of a grid (cells aligned with raster pixels)."""
+        cell = self.grid.fine_cell
+        cols = np.clip(np.round((x_edges - self.raster_origin[0]) / cell).astype(int),
+                       0, self.raster_shape[1])
+        rows = np.clip(np.round((y_edges - self.raster_origin[1]) / cell).astype(int),
+                       0, self.raster_shape[0])
+        window = self.char[rows[0]:rows[-1], cols[0]:cols[-1]]
+        integral = np.zeros((window.shape[0] + 1, window.shape[1] + 1))
+        integral[1:, 1:] = window.cumsum(0).cumsum(1)
+        r, c = rows - rows[0], cols - cols[0]
+        sums = (integral[r[1:]][:, c[1:]] - integral[r[:-1]][:, c[1:]]
+                - integral[r[1:]][:, c[:-1]] + integral[r[:-1]][:, c[:-1]])
+        counts = np.outer(np.diff(r), np.diff(c))
+        # Cells off the panel (counts 0) are bare wood.
+        return np.where(counts > 0, sums / np.maximum(counts, 1), 0.0)
+
+    # ------------------------------------------------------------------ state
+    def stored_energy(self):
+        """Heat content of the patch above ambient [J]."""
+        volumes = self.z_widths[:, None, None] * self.cell_areas[None]
+        return float(self.wood.volumetric_heat_capacity * np.sum(volumes * self.theta))
+
+    def reset_ledger(self):
+        """Start a new energy ledger from the present state."""
+        self.ledger = EnergyLedger(initial_stored=self.stored_energy())
+
+    def absorptance(self):
+        """Solar absorptance of each patch column (y, x) [-]."""
+        return self._absorptance.copy()
+
+    def surface_temperature(self):
+        """Surface temperature of each patch column (y, x) [degC], half-layer extrapolated."""
+        return self.wood.ambient + self._surface_theta(self.theta[0], self._last_absorbed)
+
+    def _surface_theta(self, top, absorbed):
+        """Surface theta from the top-layer theta and the absorbed flux [K]."""
+        k = self.wood.conductivity
+        loss = self._surface_loss(top)
+        return top + (absorbed - loss) * (0.5 * self.z_widths[0]) / k
+
+    def _surface_loss(self, top):
+        """Convective and radiative loss flux at the surface for top-layer theta [W/m^2]."""
+        return self._h_top * top + self._radiation_remainder(top)
+
+    def _radiation_remainder(self, top):
+        """Radiation beyond its linearisation at ambient [W/m^2] (treated explicitly)."""
+        t_a = self.wood.ambient + KELVIN
+        t = np.maximum(top + t_a, 0.0)
+        return (self.wood.emissivity * STEFAN_BOLTZMANN * (t ** 4 - t_a ** 4)
+                - self._h_radiation_linear * top)
+
+    def far_field_surface_temperature(self):
+        """Surface temperature of the panel far from the patch [degC]."""
+        return self.wood.ambient + float(self.far_field[0])
+
+    def surface_temperature_at(self, x, y):
+        """Surface temperature at world points (x, y) on the panel [degC], far field outside."""
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        surface = self._surface_theta(self.theta[0], self._last_absorbed)
+        ix, wx = bilinear_weights(self.x_centres, x)
+        iy, wy = bilinear_weights(self.y_centres, y)
+        value = ((1 - wy) * ((1 - wx) * surface[iy, ix] + wx * surface[iy, ix + 1])
+                 + wy * ((1 - wx) * surface[iy + 1, ix] + wx * surface[iy + 1, ix + 1]))
+        inside = ((x >= self.x_edges[0]) & (x <= self.x_edges[-1])
+                  & (y >= self.y_edges[0]) & (y <= self.y_edges[-1]))
+        return self.wood.ambient + np.where(inside, value, self.far_field[0])
+
+    def char_at(self, x, y):
+        """Char fraction of the raster pixel under world points (x, y) (0 off the panel)."""
+        cell = self.grid.fine_cell
+        col = np.floor((np.asarray(x, dtype=float) - self.raster_origin[0]) / cell).astype(int)
+        row = np.floor((np.asarray(y, dtype=float) - self.raster_origin[1]) / cell).astype(int)
+        inside = ((col >= 0) & (col < self.raster_shape[1])
+                  & (row >= 0) & (row < self.raster_shape[0]))
+        return np.where(inside, self.char[np.clip(row, 0, self.raster_shape[0] - 1),
+                                          np.clip(col, 0, self.raster_shape[1] - 1)], 0.0)
+
+    # ------------------------------------------------------------------ dynamics
+    def follow(self, spot_xy):
+        """Re-centre the patch on `spot_xy` if the spot came near the edge of the fine region."""
+        if spot_xy is None or not np.all(np.isfinite(spot_xy)):
+            return False
+        limit = self.grid.fine_half_width - self.grid.recentre_margin
+        if np.max(np.abs(np.asarray(spot_xy, dtype=float)[:2] - self._centre)) <= limit:
+            return False
+        corner = self._snap(spot_xy)
+        if np.array_equal(corner, self._corner):
+            return False
+        self.recentre(corner)
+        return True
+
+    def recentre(self, corner):
+        """Move the patch to raster corner `corner`, carrying the temperature field over."""
+        before = self.stored_energy()
+        old_x, old_y, old_theta = self.x_centres, self.y_centres, self.theta
+        old_bounds = (self.x_edges[0], self.x_edges[-1], self.y_edges[0], self.y_edges[-1])
+        self._place(np.asarray(corner, dtype=int))
+        ix, wx = bilinear_weights(old_x, self.x_centres)
+        iy, wy = bilinear_weights(old_y, self.y_centres)
+        inside = (((self.x_centres >= old_bounds[0]) & (self.x_centres <= old_bounds[1]))[None]
+                  & ((self.y_centres >= old_bounds[2])
+                     & (self.y_centres <= old_bounds[3]))[:, None])
+        wx, wy = wx[None, None, :], wy[None, :, None]
+        yy, xx = iy[:, None], ix[None, :]
+        moved = ((1 - wy) * ((1 - wx) * old_theta[:, yy, xx] + wx * old_theta[:, yy, xx + 1])
+                 + wy * ((1 - wx) * old_theta[:, yy + 1, xx]
+                         + wx * old_theta[:, yy + 1, xx + 1]))
+        self.theta = np.where(inside[None], moved, self.far_field[:, None, None])
+        self._last_absorbed = np.zeros_like(self.cell_areas)
+        self._last_irradiance = np.zeros_like(self.cell_areas)
+        self.ledger.regrid += self.stored_energy() - before
+        self.recentres += 1
+
+    def step(self, dt, irradiance, far_irradiance=0.0):
+        """
+        Advance by `dt` [s] under solar `irradiance` on each patch column (y, x) [W/m^2].
+
+        `far_irradiance` is the (unconcentrated) irradiance far from the patch [W/m^2].
+        Douglas ADI: (I - dt Ax) u1 = u + dt (Ay + Az) u + dt f; (I - dt Ay) u2 = u1 - dt Ay u;
+        (I - dt Az) u3 = u2 - dt Az u; f the explicit surface source.
+        """
+        if not dt > 0.0:
+            raise ValueError(f'dt must be > 0 s, got {dt}')
+        irradiance = np.asarray(irradiance, dtype=float)
+        if irradiance.shape != self.cell_areas.shape:
+            raise ValueError(f'irradiance must have shape {self.cell_areas.shape}, '
+                             f'got {irradiance.shape}')
+        if not np.all(np.isfinite(irradiance)) or np.any(irradiance < 0.0):
+            raise ValueError('irradiance must be finite and >= 0')
+        rho_c = self.wood.volumetric_heat_capacity
+        dz0 = self.z_widths[0]
+        absorbed = self._absorptance * irradiance
+        theta = self.theta
+        remainder = self._radiation_remainder(theta[0])
+        source_top = (absorbed - remainder) / (rho_c * dz0)
+
+        ay = _apply_tridiagonal(*self._ops_xy, np.moveaxis(theta, 1, 0))
+        ay = np.moveaxis(ay, 0, 1)
+        az = _apply_tridiagonal(*self._ops_z, theta)
+        rhs = theta + dt * (ay + az)
+        rhs[0] += dt * source_top
+        # x sweep: the x axis first
+        u1 = np.moveaxis(_solve_shifted(*self._ops_xy, dt,
+                                        np.ascontiguousarray(np.moveaxis(rhs, 2, 0))), 0, 2)
+        u2 = np.moveaxis(_solve_shifted(*self._ops_xy, dt, np.ascontiguousarray(
+            np.moveaxis(u1 - dt * ay, 1, 0))), 0, 1)
+        u3 = _solve_shifted(*self._ops_z, dt, u2 - dt * az)
+
+        areas = self.cell_areas
+        self.ledger.absorbed += dt * float(np.sum(absorbed * areas))
+        self.ledger.lost_top += dt * float(np.sum((self._h_top * u3[0] + remainder) * areas))
+        self.ledger.lost_back += dt * float(np.sum(self._h_back * u3[-1] * areas))
+        self.theta = u3
+        self._last_absorbed = absorbed
+        self._last_irradiance = irradiance
+        self._step_far_field(dt, far_irradiance)
+        self._update_char(dt)
+        self.time += dt
+
+    def _step_far_field(self, dt, far_irradiance):
+        """Backward-Euler step of the 1-D column far from the spot."""
+        rho_c = self.wood.volumetric_heat_capacity
+        top = self.far_field[0]
+        rhs = self.far_field.copy()
+        rhs[0] += dt * (self.wood.absorptance_wood * far_irradiance
+                        - float(self._radiation_remainder(top))) / (rho_c * self.z_widths[0])
+        self.far_field = _solve_shifted(*self._ops_z, dt, rhs)
+
+    def _update_char(self, dt):
+        """Advance the char fraction where the surface passed T_p (fine region only)."""
+        w = self.wood
+        surface = self._surface_theta(self.theta[0], self._last_absorbed) + w.ambient
+        fine = (self._fine, self._fine)
+        hot = surface[fine] > w.pyrolysis_temperature
+        outside = surface > w.pyrolysis_temperature
+        outside[fine] = False
+        if np.any(outside):
+            self.coarse_overheat = True
+        if not np.any(hot):
+            return
+        t_kelvin = surface[fine] + KELVIN
+        rate = np.where(hot, w.char_preexponential
+                        * np.exp(-w.char_activation_energy / (GAS_CONSTANT * t_kelvin)), 0.0)
+        chi = self.char[self._raster_fine]
+        chi[:] = 1.0 - (1.0 - chi) * np.exp(-rate * dt)
+        self._absorptance[fine] = (w.absorptance_wood
+                                   + (w.absorptance_char - w.absorptance_wood) * chi)
+
+    def charred_mask(self):
+        """Boolean raster of pixels whose char fraction passed `charred_fraction`."""
+        return self.char >= self.wood.charred_fraction
+
+    def raster_pixel_centres(self):
+        """World x of the raster's columns and y of its rows [m] (row 0 at y_min)."""
+        cell = self.grid.fine_cell
+        return (self.raster_origin[0] + (np.arange(self.raster_shape[1]) + 0.5) * cell,
+                self.raster_origin[1] + (np.arange(self.raster_shape[0]) + 0.5) * cell)
