@@ -1,0 +1,277 @@
+"""
+Dobot Magician client over pyserial: typed commands with timeouts and bounded retries.
+
+Every request waits for the reply that echoes its id and ctrl, up to ``timeout`` seconds;
+a missing, corrupted (bad checksum) or truncated reply is retried up to ``retries`` more
+times, then ``DeviceTimeoutError`` says which command failed. Retrying a queued move whose
+reply was lost may queue it twice; PTP targets are absolute, so the duplicate is a move of
+zero length, and the client waits for the later index. A failing port (unplugged) raises
+``LinkError`` at once and closes the port.
+
+A queued move is complete when the executed index (command 246) reaches the index its
+reply gave (``wait_for_index``), never when the reply arrives. ``check_target`` refuses a
+target beyond the joint limits before anything is sent, naming the joint, using
+``helio_optics.arm_kinematics.DobotArm``; units are converted here between SI (m, rad) and
+the protocol (mm, deg).
+"""
+
+import math
+import threading
+import time
+
+from helio_drivers import dobot_protocol as proto
+from helio_drivers.dobot_emulator import J4_LIMITS_DEG
+from helio_drivers.serial_link import (
+    DeviceTimeoutError, LinkError, open_serial, PORT_FAILURES)
+from helio_optics.arm_kinematics import DobotArm, UnreachableError
+import numpy as np
+import serial
+
+CARTESIAN_MODES = (proto.PtpMode.MOVJ_XYZ, proto.PtpMode.MOVL_XYZ, proto.PtpMode.JUMP_XYZ)
+
+LIMIT_ALARMS = frozenset(
+    [proto.Alarm.PLAN_INV_SINGULARITY, proto.Alarm.PLAN_INV_CALC, proto.Alarm.PLAN_INV_LIMIT,
+     proto.Alarm.MOVE_INV_SINGULARITY, proto.Alarm.MOVE_INV_CALC, proto.Alarm.MOVE_INV_LIMIT]
+    + [code for code in proto.Alarm if code.name.startswith('LIMIT_AXIS')])
+
+
+def target_to_protocol(mode, target):
+    """PTP parameters (mm, deg) for an SI target: (x, y, z [m], r [rad]) or j1..j4 [rad]."""
+    target = [float(v) for v in target]
+    if len(target) != 4 or not all(math.isfinite(v) for v in target):
+        raise ValueError(f'target must be 4 finite numbers, got {target}')
+    if mode == proto.PtpMode.MOVJ_ANGLE:
+        return tuple(math.degrees(v) for v in target)
+    if mode in CARTESIAN_MODES:
+        return (target[0] * 1000.0, target[1] * 1000.0, target[2] * 1000.0,
+                math.degrees(target[3]))
+    raise ValueError(f'mode {mode} is not one of MOVJ_XYZ (1), MOVL_XYZ (2), MOVJ_ANGLE (4)')
+
+
+def pose_to_si(pose):
+    """Return (x, y, z [m], r [rad]) and (j1..j4 [rad]) of a GetPose reply."""
+    cartesian = (pose.x / 1000.0, pose.y / 1000.0, pose.z / 1000.0, math.radians(pose.r))
+    return cartesian, tuple(math.radians(j) for j in pose.joints)
+
+
+def check_target(arm, mode, target):
+    """
+    Raise UnreachableError (naming the joint and the excess) for a target beyond the limits.
+
+    `target` is SI as in MoveArm: Cartesian (m, rad) or joints (rad). The end servo j4 is
+    checked against the Magician's +-150 deg as well.
+    """
+    values = np.array([float(v) for v in target])
+    if mode == proto.PtpMode.MOVJ_ANGLE:
+        joints = values[:3]
+        arm.check_limits(joints)
+        j4 = values[3]
+    elif mode in CARTESIAN_MODES:
+        joints = arm.inverse(values[:3], check_limits=True)
+        j4 = values[3] - joints[0]
+    else:
+        raise ValueError(f'mode {mode} is not one of MOVJ_XYZ (1), MOVL_XYZ (2), MOVJ_ANGLE (4)')
+    lower, upper = (math.radians(v) for v in J4_LIMITS_DEG)
+    if not lower <= j4 <= upper:
+        excess = max(lower - j4, j4 - upper)
+        raise UnreachableError(
+            f'j4 (end servo) would be {math.degrees(j4):.2f} deg, {math.degrees(excess):.2f} '
+            f'deg outside [{J4_LIMITS_DEG[0]:.1f}, {J4_LIMITS_DEG[1]:.1f}] deg',
+            joint='j4 (end servo)', excess=excess)
+
+
+class DobotClient:
+    """A Dobot Magician on a serial port (thread-safe: one request at a time)."""
+
+    def __init__(self, port, baudrate=115200, timeout=0.2, retries=2, arm=None):
+        """Configure; nothing is opened until connect()."""
+        if timeout <= 0.0:
+            raise ValueError(f'timeout must be positive, got {timeout}')
+        if retries < 0:
+            raise ValueError(f'retries must be >= 0, got {retries}')
+        self.port = port
+        self.baudrate = baudrate
+        self.timeout = timeout
+        self.retries = retries
+        self.arm = arm or DobotArm()
+        self._serial = None
+        self._reader = proto.FrameReader()
+        self._lock = threading.Lock()
+        self.retried = 0            # requests sent again after a bad or missing reply
+        self.requests = 0
+
+    # ---- link -------------------------------------------------------------------------------
+
+    @property
+    def connected(self):
+        """Whether the port is open (no failure seen since)."""
+        return self._serial is not None
+
+    @property
+    def checksum_errors(self):
+        """Count the replies dropped for a bad checksum since creation."""
+        return self._reader.checksum_errors
+
+    def connect(self):
+        """Open the port; LinkError if it cannot be opened."""
+        with self._lock:
+            self._close_locked()
+            self._serial = open_serial(self.port, self.baudrate, self.timeout)
+            self._reader.reset()
+
+    def close(self):
+        """Close the port (idempotent)."""
+        with self._lock:
+            self._close_locked()
+
+    def _close_locked(self):
+        if self._serial is not None:
+            try:
+                self._serial.close()
+            except PORT_FAILURES:
+                pass
+            self._serial = None
+
+    # ---- requests ---------------------------------------------------------------------------
+
+    def request(self, frame, timeout=None):
+        """Send `frame` and return the reply Frame; retries, then DeviceTimeoutError."""
+        timeout = self.timeout if timeout is None else timeout
+        name = _command_name(frame)
+        with self._lock:
+            if self._serial is None:
+                raise LinkError(f'{name}: port {self.port} is not open')
+            data = frame.encode()
+            try:
+                for attempt in range(self.retries + 1):
+                    if attempt:
+                        self.retried += 1
+                    self.requests += 1
+                    self._serial.reset_input_buffer()
+                    self._reader.reset()
+                    try:
+                        self._serial.write(data)
+                    except serial.SerialTimeoutException:
+                        continue        # a slow link, not a lost one: retry
+                    reply = self._await_reply(frame, time.monotonic() + timeout)
+                    if reply is not None:
+                        return reply
+            except PORT_FAILURES as error:
+                self._close_locked()
+                raise LinkError(f'{name}: link to {self.port} lost: {error}') from error
+        raise DeviceTimeoutError(
+            f'{name}: no valid reply from {self.port} within {timeout:.3f} s '
+            f'after {self.retries + 1} attempts')
+
+    def _await_reply(self, frame, deadline):
+        port = self._serial
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0.0:
+                return None
+            port.timeout = min(remaining, 0.05)
+            chunk = port.read(max(1, port.in_waiting))
+            for reply in self._reader.feed(chunk):
+                if proto.is_reply_to(reply, frame):
+                    return reply
+
+    # ---- typed commands ---------------------------------------------------------------------
+
+    def get_pose(self):
+        """Return the current Pose (mm, deg)."""
+        return proto.decode_pose(self.request(proto.get_pose_request()).params)
+
+    def get_alarms(self):
+        """Return the active alarm codes."""
+        return proto.decode_alarm_state(self.request(proto.get_alarms_request()).params)
+
+    def clear_alarms(self):
+        """Clear every alarm."""
+        self.request(proto.clear_alarms_request())
+
+    def set_ptp_joint_params(self, params):
+        """Set PTP joint velocities [deg/s] and accelerations [deg/s^2]."""
+        self.request(proto.ptp_joint_params_request(params))
+
+    def get_ptp_joint_params(self):
+        """Return the PTP joint parameters."""
+        return proto.decode_ptp_joint_params(
+            self.request(proto.ptp_joint_params_request()).params)
+
+    def set_ptp_coordinate_params(self, params):
+        """Set PTP Cartesian velocity/acceleration."""
+        self.request(proto.ptp_coordinate_params_request(params))
+
+    def set_ptp_common_params(self, params):
+        """Set the PTP velocity and acceleration ratios [%]."""
+        self.request(proto.ptp_common_params_request(params))
+
+    def home(self):
+        """Queue the homing procedure; return its queue index."""
+        return proto.decode_index(self.request(proto.home_request()).params)
+
+    def ptp(self, mode, values):
+        """Queue a PTP move (mode, four values in mm/deg); return its queue index."""
+        return proto.decode_index(
+            self.request(proto.ptp_request(proto.PtpCommand(int(mode), *values))).params)
+
+    def move(self, mode, target):
+        """Check an SI target against the limits, queue it; return the queue index."""
+        check_target(self.arm, mode, target)
+        return self.ptp(mode, target_to_protocol(mode, target))
+
+    def wait(self, milliseconds):
+        """Queue a pause; return its queue index."""
+        return proto.decode_index(self.request(proto.wait_request(milliseconds)).params)
+
+    def queue_start(self):
+        """Start executing the command queue."""
+        self.request(proto.queue_start_request())
+
+    def queue_stop(self):
+        """Stop the queue after the current command."""
+        self.request(proto.queue_stop_request())
+
+    def queue_force_stop(self):
+        """Stop the queue and the arm now."""
+        self.request(proto.queue_force_stop_request())
+
+    def queue_clear(self):
+        """Drop the queued commands not yet executed."""
+        self.request(proto.queue_clear_request())
+
+    def stop_and_clear(self):
+        """Force-stop, clear the queue and restart it (ready for the next move)."""
+        self.queue_force_stop()
+        self.queue_clear()
+        self.queue_start()
+
+    def executed_index(self):
+        """Return the index of the last queued command executed."""
+        return proto.decode_index(self.request(proto.queue_current_index_request()).params)
+
+    def wait_for_index(self, index, timeout, poll_period=0.02, stop_event=None):
+        """
+        Poll until the executed index reaches `index`; return True, or False if stopped.
+
+        Raises DeviceTimeoutError when `timeout` [s] passes first.
+        """
+        deadline = time.monotonic() + timeout
+        while True:
+            if self.executed_index() >= index:
+                return True
+            if time.monotonic() >= deadline:
+                raise DeviceTimeoutError(
+                    f'queued command {index} not executed within {timeout:.1f} s')
+            if stop_event is not None and stop_event.wait(poll_period):
+                return False
+            if stop_event is None:
+                time.sleep(poll_period)
+
+
+def _command_name(frame):
+    try:
+        name = proto.CommandId(frame.command_id).name
+    except ValueError:
+        name = f'command {frame.command_id}'
+    return name + (' (write)' if frame.write else '')

@@ -1,0 +1,197 @@
+"""pyserial clients against the emulators over real ptys: moves, limits, faults, unplug."""
+
+import math
+import threading
+import time
+
+from helio_drivers import dobot_protocol as proto
+from helio_drivers import maestro_protocol as mproto
+from helio_drivers.dobot_client import DobotClient, pose_to_si, target_to_protocol
+from helio_drivers.dobot_emulator import DobotEmulator
+from helio_drivers.maestro_client import MaestroClient
+from helio_drivers.maestro_emulator import MaestroEmulator
+from helio_drivers.serial_link import DeviceTimeoutError, LinkError, ReconnectBackoff
+from helio_optics.arm_kinematics import DobotArm, UnreachableError
+import pytest
+
+FAST_JOINTS = proto.PtpJointParams((300.0,) * 4, (1000.0,) * 4)
+
+
+@pytest.fixture
+def dobot():
+    emulator = DobotEmulator()
+    client = DobotClient(emulator.port_path, timeout=0.1, retries=2)
+    client.connect()
+    client.set_ptp_joint_params(FAST_JOINTS)
+    client.set_ptp_coordinate_params(proto.PtpCoordinateParams(500.0, 300.0, 2000.0, 1000.0))
+    try:
+        yield emulator, client
+    finally:
+        client.close()
+        emulator.close()
+
+
+def test_homing_then_queued_moves_complete_in_order_at_the_asked_pose(dobot):
+    emulator, client = dobot
+    client.ptp(proto.PtpMode.MOVJ_ANGLE, (30.0, 40.0, 30.0, 0.0))
+    assert client.wait_for_index(client.home(), timeout=5.0)
+    assert client.get_pose().joints == pytest.approx(tuple(emulator.home_joints_deg), abs=1e-4)
+    targets = [(proto.PtpMode.MOVJ_XYZ, (0.22, 0.03, 0.05, 0.1)),
+               (proto.PtpMode.MOVL_XYZ, (0.20, -0.03, 0.08, 0.0)),
+               (proto.PtpMode.MOVJ_ANGLE, (0.2, 0.5, 0.3, -0.1))]
+    indices = []
+    for mode, target in targets:
+        indices.append(client.move(mode, target))
+        client.wait(300)        # a pause so the pose can be read before the next move
+    finished = []
+    for index, (mode, target) in zip(indices, targets):
+        assert client.wait_for_index(index, timeout=5.0)
+        finished.append(client.executed_index())
+        cartesian, joints = pose_to_si(client.get_pose())
+        achieved = joints if mode == proto.PtpMode.MOVJ_ANGLE else cartesian
+        # float32 on the wire: ~1e-5 of the value
+        assert achieved == pytest.approx(target, abs=2e-5)
+        if mode != proto.PtpMode.MOVJ_ANGLE:
+            assert DobotArm().forward(joints[:3]) == pytest.approx(target[:3], abs=2e-5)
+    assert finished == sorted(finished)
+    assert client.get_alarms() == []
+
+
+def test_unit_conversion_is_mm_and_degrees():
+    assert target_to_protocol(proto.PtpMode.MOVJ_XYZ, (0.2, -0.01, 0.05, math.pi / 2)) == \
+        pytest.approx((200.0, -10.0, 50.0, 90.0))
+    assert target_to_protocol(proto.PtpMode.MOVJ_ANGLE, (math.pi, 0, 0, 0))[0] == \
+        pytest.approx(180.0)
+    with pytest.raises(ValueError, match='mode'):
+        target_to_protocol(3, (0, 0, 0, 0))
+
+
+def test_a_target_beyond_a_joint_limit_is_refused_naming_the_joint(dobot):
+    emulator, client = dobot
+    before = client.executed_index()
+    with pytest.raises(UnreachableError, match='j2'):
+        client.move(proto.PtpMode.MOVJ_ANGLE, (0.0, math.radians(95.0), 0.2, 0.0))
+    with pytest.raises(UnreachableError, match='j1'):
+        client.move(proto.PtpMode.MOVJ_XYZ, (-0.05, -0.2, 0.05, 0.0))
+    assert client.executed_index() == before and emulator.frames_received > 0
+    # sent anyway (no pre-check), the device refuses it with an alarm naming the axis
+    index = client.ptp(proto.PtpMode.MOVJ_ANGLE, (0.0, 95.0, 10.0, 0.0))
+    assert client.wait_for_index(index, timeout=2.0)
+    alarms = client.get_alarms()
+    assert proto.Alarm.LIMIT_AXIS2_POS in alarms
+    assert 'j2' in proto.alarm_description(proto.Alarm.LIMIT_AXIS2_POS)
+
+
+def test_force_stop_mid_move_stops_the_arm(dobot):
+    emulator, client = dobot
+    client.set_ptp_joint_params(proto.PtpJointParams((20.0,) * 4, (100.0,) * 4))
+    index = client.ptp(proto.PtpMode.MOVJ_ANGLE, (80.0, 10.0, 10.0, 0.0))
+    stop = threading.Event()
+    assert emulator.is_moving()
+    assert not client.wait_for_index(index, timeout=5.0, poll_period=0.02,
+                                     stop_event=_set_after(stop, 0.2))
+    client.stop_and_clear()
+    halted = client.get_pose().j1
+    assert 0.0 < halted < 80.0
+    assert not emulator.is_moving()
+    assert client.executed_index() < index
+
+
+def _set_after(event, seconds):
+    timer = threading.Timer(seconds, event.set)
+    timer.daemon = True
+    timer.start()
+    return event
+
+
+@pytest.mark.parametrize('fault', ['corrupt_replies', 'truncate_replies', 'drop_replies',
+                                   'garbage_replies'])
+def test_bad_replies_are_detected_and_retried(dobot, fault):
+    emulator, client = dobot
+    client.get_pose()
+    retried, checksum_errors = client.retried, client.checksum_errors
+    emulator.inject(**{fault: 1})
+    pose = client.get_pose()
+    assert pose.joints == pytest.approx(tuple(emulator.joint_positions_deg()), abs=1e-4)
+    if fault == 'garbage_replies':
+        assert client.retried == retried          # garbage before a good frame is skipped
+    else:
+        assert client.retried == retried + 1
+    if fault == 'corrupt_replies':
+        assert client.checksum_errors == checksum_errors + 1
+
+
+def test_no_reply_raises_a_timeout_within_the_configured_time(dobot):
+    emulator, client = dobot
+    emulator.inject(mute=True)
+    started = time.monotonic()
+    with pytest.raises(DeviceTimeoutError, match='GET_POSE.*0.100 s.*3 attempts'):
+        client.get_pose()
+    elapsed = time.monotonic() - started
+    assert 3 * 0.1 <= elapsed < 3 * 0.1 + 0.5
+    emulator.clear_faults()
+    assert client.get_pose() is not None
+
+
+def test_unplug_mid_move_fails_fast_and_the_same_path_reopens(dobot):
+    emulator, client = dobot
+    client.set_ptp_joint_params(proto.PtpJointParams((20.0,) * 4, (100.0,) * 4))
+    index = client.ptp(proto.PtpMode.MOVJ_ANGLE, (60.0, 10.0, 10.0, 0.0))
+    threading.Timer(0.2, emulator.disconnect).start()
+    started = time.monotonic()
+    with pytest.raises(LinkError, match='lost'):
+        client.wait_for_index(index, timeout=10.0)
+    assert time.monotonic() - started < 0.2 + 0.5
+    assert not client.connected
+    with pytest.raises(LinkError, match='cannot open'):
+        client.connect()
+    emulator.reconnect()
+    client.connect()
+    assert client.get_pose() is not None
+
+
+def test_backoff_doubles_and_caps():
+    backoff = ReconnectBackoff(0.1, 0.5)
+    assert [backoff.failed(0.0) for _ in range(5)] == pytest.approx([0.1, 0.2, 0.4, 0.5, 0.5])
+    assert not backoff.due(0.4) and backoff.due(0.5)
+    backoff.succeeded()
+    assert backoff.attempts == 0 and backoff.due(0.0)
+
+
+@pytest.fixture
+def maestro():
+    emulator = MaestroEmulator()
+    client = MaestroClient(emulator.port_path, timeout=0.1, retries=1)
+    client.connect()
+    try:
+        yield emulator, client
+    finally:
+        client.close()
+        emulator.close()
+
+
+def test_maestro_client_moves_a_servo_and_reads_it_back(maestro):
+    emulator, client = maestro
+    client.set_speed(0, 0)
+    client.set_acceleration(0, 0)
+    client.set_target(0, 4 * 1800)
+    assert client.get_position(0) == 4 * 1800
+    assert not client.moving()
+    assert client.get_errors() == 0
+    assert emulator.pulse_widths_us()[0] == pytest.approx(1800.0)
+    calibration = mproto.ServoCalibration('lens_pitch', 0)
+    assert calibration.angle(client.get_position(0) / 4.0) == pytest.approx(
+        300.0 * math.pi / 2000.0)
+
+
+def test_maestro_client_retries_and_times_out(maestro):
+    emulator, client = maestro
+    emulator.inject(drop_replies=1)
+    assert client.get_position(0) == 6000 and client.retried == 1
+    emulator.inject(mute=True)
+    with pytest.raises(DeviceTimeoutError, match='get position ch 1'):
+        client.get_position(1)
+    emulator.clear_faults()
+    emulator.disconnect()
+    with pytest.raises(LinkError):
+        client.get_position(0)

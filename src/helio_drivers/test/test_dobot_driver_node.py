@@ -1,0 +1,179 @@
+"""dobot_driver in-process against the emulator on a pty: moves, limits, cancel, unplug."""
+
+import math
+import threading
+import time
+
+from helio_drivers.dobot_driver_node import DobotDriverNode
+from helio_drivers.dobot_emulator import DobotEmulator
+from helio_msgs.action import MoveArm
+from helio_msgs.msg import DeviceStatus
+from helio_optics.arm_kinematics import DobotArm
+import pytest
+import rclpy
+from rclpy.action import ActionClient
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from sensor_msgs.msg import JointState
+
+
+def wait_for(future, timeout=10.0):
+    """Wait on an rclpy future (spun by the executor thread) and return its result."""
+    done = threading.Event()
+    future.add_done_callback(lambda _: done.set())
+    assert done.wait(timeout), 'future not done in time'
+    return future.result()
+
+
+class Graph:
+    """The driver node, a client node and an executor thread in a private context."""
+
+    def __init__(self, emulator, **overrides):
+        self.context = rclpy.context.Context()
+        rclpy.init(context=self.context)
+        parameters = {'port': emulator.port_path, 'timeout_s': 0.1, 'retries': 1,
+                      'joint_state_rate_hz': 50.0, 'status_period_s': 0.2,
+                      'reconnect_initial_s': 0.05, 'reconnect_max_s': 0.2,
+                      'joint_velocity_dps': [200.0] * 4,
+                      'joint_acceleration_dps2': [800.0] * 4}
+        parameters.update(overrides)
+        self.driver = DobotDriverNode(context=self.context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in parameters.items()])
+        self.node = rclpy.create_node('dobot_test_client', context=self.context)
+        self.client = ActionClient(self.node, MoveArm, 'move_arm')
+        self.joint_states = []
+        self.statuses = []
+        self.status_event = threading.Event()
+        self.node.create_subscription(JointState, 'joint_states', self.joint_states.append, 10)
+        self.node.create_subscription(
+            DeviceStatus, 'dobot/status', self._status,
+            QoSProfile(depth=20, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
+        self.executor.add_node(self.driver)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+        assert self.client.wait_for_server(timeout_sec=10.0)
+
+    def _status(self, message):
+        self.statuses.append(message)
+        self.status_event.set()
+
+    def wait_status(self, predicate, timeout=5.0):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if any(predicate(s) for s in list(self.statuses)):
+                return True
+            self.status_event.clear()
+            self.status_event.wait(0.1)
+        return False
+
+    def send(self, mode, target, feedback=None):
+        goal = MoveArm.Goal(mode=mode, target=[float(v) for v in target])
+        handle = wait_for(self.client.send_goal_async(goal, feedback_callback=feedback))
+        assert handle.accepted
+        return handle
+
+    def move(self, mode, target):
+        handle = self.send(mode, target)
+        return wait_for(handle.get_result_async())
+
+    def close(self):
+        self.executor.shutdown()
+        self.driver.destroy_node()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self.thread.join(timeout=5.0)
+
+
+@pytest.fixture
+def graph():
+    emulator = DobotEmulator()
+    graph = Graph(emulator)
+    try:
+        yield emulator, graph
+    finally:
+        graph.close()
+        emulator.close()
+
+
+def test_moves_succeed_with_feedback_and_joint_states(graph):
+    emulator, graph = graph
+    target = (0.21, 0.04, 0.06, 0.2)
+    feedback = []
+    handle = graph.send(MoveArm.Goal.MOVJ_XYZ, target, feedback=feedback.append)
+    response = wait_for(handle.get_result_async())
+    assert response.result.success, response.result.message
+    assert list(response.result.achieved_cartesian) == pytest.approx(target, abs=2e-5)
+    assert DobotArm().forward(emulator.joint_positions()[:3]) == pytest.approx(
+        target[:3], abs=2e-5)
+    assert feedback, 'no feedback during the move'
+    response = graph.move(MoveArm.Goal.MOVJ_ANGLE, (0.1, 0.4, 0.3, 0.0))
+    assert response.result.success
+    assert list(response.result.achieved_joints) == pytest.approx((0.1, 0.4, 0.3, 0.0),
+                                                                  abs=1e-6)
+    assert graph.joint_states[-1].name == ['dobot_j1', 'dobot_j2', 'dobot_j3', 'dobot_j4']
+    assert graph.wait_status(lambda s: s.connected and s.device == 'dobot')
+
+
+def test_a_goal_beyond_a_joint_limit_is_refused_naming_the_joint(graph):
+    emulator, graph = graph
+    before = emulator.frames_received
+    response = graph.move(MoveArm.Goal.MOVJ_ANGLE, (0.0, math.radians(100.0), 0.2, 0.0))
+    assert not response.result.success
+    assert 'j2' in response.result.message
+    assert not emulator.is_moving() and emulator.executed_index == 0
+    assert emulator.frames_received >= before
+    response = graph.move(MoveArm.Goal.MOVL_XYZ, (0.6, 0.0, 0.0, 0.0))
+    assert not response.result.success and 'reach' in response.result.message
+
+
+def passed_j1(degrees):
+    """Return a feedback callback and an event set once j1 has passed `degrees`."""
+    event = threading.Event()
+
+    def on_feedback(message):
+        if message.feedback.current_joints[0] >= math.radians(degrees):
+            event.set()
+    return on_feedback, event
+
+
+def test_cancel_mid_move_stops_the_arm_and_clears_the_queue(graph):
+    emulator, graph = graph
+    on_feedback, moving = passed_j1(10.0)
+    handle = graph.send(MoveArm.Goal.MOVJ_ANGLE, (math.radians(85.0), 0.2, 0.2, 0.0),
+                        feedback=on_feedback)
+    assert moving.wait(5.0)
+    wait_for(handle.cancel_goal_async())
+    response = wait_for(handle.get_result_async())
+    assert response.status == 5      # GoalStatus.STATUS_CANCELED
+    assert 'force-stopped' in response.result.message
+    stopped = emulator.joint_positions_deg()[0]
+    assert 10.0 <= stopped < 85.0 and not emulator.is_moving()
+    # the queue was restarted: the next move runs
+    assert graph.move(MoveArm.Goal.MOVJ_ANGLE, (0.0, 0.2, 0.2, 0.0)).result.success
+
+
+def test_unplug_mid_move_aborts_within_half_a_second_then_reconnects(graph):
+    emulator, graph = graph
+    on_feedback, moving = passed_j1(5.0)
+    handle = graph.send(MoveArm.Goal.MOVJ_ANGLE, (math.radians(85.0), 0.2, 0.2, 0.0),
+                        feedback=on_feedback)
+    result_future = handle.get_result_async()
+    assert moving.wait(5.0)
+    unplugged_at = time.monotonic()
+    emulator.disconnect()
+    response = wait_for(result_future)
+    assert time.monotonic() - unplugged_at < 0.5
+    assert not response.result.success and 'link lost' in response.result.message
+    assert graph.wait_status(lambda s: not s.connected)
+    # goals fail fast while the port is gone
+    started = time.monotonic()
+    response = graph.move(MoveArm.Goal.MOVJ_ANGLE, (0.0, 0.2, 0.2, 0.0))
+    assert not response.result.success and 'not connected' in response.result.message
+    assert time.monotonic() - started < 0.5
+    graph.statuses.clear()
+    emulator.reconnect()
+    assert graph.wait_status(lambda s: s.connected)
+    assert graph.move(MoveArm.Goal.MOVJ_ANGLE, (0.0, 0.2, 0.2, 0.0)).result.success
