@@ -244,17 +244,13 @@ class WoodPanel:
         self._ops_xy = _tridiagonal_operator(self._lateral, a)
         lower, diagonal, upper = _tridiagonal_operator(self.z_edges, a)
         rho_c = self.wood.volumetric_heat_capacity
-        # Linear surface loss: convection plus radiation linearised at ambient (implicit).
-        t_ambient = self.wood.ambient + KELVIN
-        self._h_radiation_linear = 4.0 * self.wood.emissivity * STEFAN_BOLTZMANN * t_ambient ** 3
-        self._h_top = self.wood.convection_top + self._h_radiation_linear
         half_bottom = 0.5 * self.z_widths[-1]
         self._h_back = (0.0 if self.wood.convection_back == 0.0 else
                         1.0 / (1.0 / self.wood.convection_back
                                + half_bottom / self.wood.conductivity))
         diagonal = diagonal.copy()
-        diagonal[0] -= self._h_top / (rho_c * self.z_widths[0])
         diagonal[-1] -= self._h_back / (rho_c * self.z_widths[-1])
+        # The surface loss is added per column (radiation linearised at each step's T).
         self._ops_z = (lower, diagonal, upper)
 
         n_lateral = len(self._lateral) - 1
@@ -355,14 +351,48 @@ class WoodPanel:
 
     def _surface_loss(self, top):
         """Convective and radiative loss flux at the surface for top-layer theta [W/m^2]."""
-        return self._h_top * top + self._radiation_remainder(top)
-
-    def _radiation_remainder(self, top):
-        """Radiation beyond its linearisation at ambient [W/m^2] (treated explicitly)."""
         t_a = self.wood.ambient + KELVIN
         t = np.maximum(top + t_a, 0.0)
-        return (self.wood.emissivity * STEFAN_BOLTZMANN * (t ** 4 - t_a ** 4)
-                - self._h_radiation_linear * top)
+        return (self.wood.convection_top * top
+                + self.wood.emissivity * STEFAN_BOLTZMANN * (t ** 4 - t_a ** 4))
+
+    def _loss_linearisation(self, top):
+        """
+        Surface loss linearised at top-layer theta: loss ~= h theta + r (Newton step).
+
+        Returns (h [W/(m^2 K)], r [W/m^2]); h is the implicit part, r the explicit one.
+        """
+        t = np.maximum(top + self.wood.ambient + KELVIN, 0.0)
+        h = self.wood.convection_top + 4.0 * self.wood.emissivity * STEFAN_BOLTZMANN * t ** 3
+        return h, self._surface_loss(top) - h * top
+
+    def _apply_z(self, theta, h_top):
+        """Return Az theta, the depth operator with the surface loss h_top (per column)."""
+        result = _apply_tridiagonal(*self._ops_z, theta)
+        result[0] -= h_top * theta[0] / (self.wood.volumetric_heat_capacity * self.z_widths[0])
+        return result
+
+    def _solve_z(self, dt, rhs, h_top):
+        """Solve (I - dt Az) x = rhs along the depth, surface loss h_top per column (Thomas)."""
+        lower, diagonal, upper = self._ops_z
+        n = len(diagonal)
+        shape = rhs.shape[1:]
+        main = [np.full(shape, 1.0 - dt * diagonal[k]) for k in range(n)]
+        main[0] = main[0] + dt * h_top / (self.wood.volumetric_heat_capacity * self.z_widths[0])
+        c_prime = [None] * n
+        d_prime = [None] * n
+        c_prime[0] = -dt * upper[0] / main[0]
+        d_prime[0] = rhs[0] / main[0]
+        for k in range(1, n):
+            a = -dt * lower[k]
+            denominator = main[k] - a * c_prime[k - 1]
+            c_prime[k] = (-dt * upper[k] / denominator) if k < n - 1 else None
+            d_prime[k] = (rhs[k] - a * d_prime[k - 1]) / denominator
+        result = np.empty_like(rhs)
+        result[n - 1] = d_prime[n - 1]
+        for k in range(n - 2, -1, -1):
+            result[k] = d_prime[k] - c_prime[k] * result[k + 1]
+        return result
 
     def far_field_surface_temperature(self):
         """Surface temperature of the panel far from the patch [degC]."""
@@ -446,12 +476,12 @@ class WoodPanel:
         dz0 = self.z_widths[0]
         absorbed = self._absorptance * irradiance
         theta = self.theta
-        remainder = self._radiation_remainder(theta[0])
+        h_top, remainder = self._loss_linearisation(theta[0])
         source_top = (absorbed - remainder) / (rho_c * dz0)
 
         ay = _apply_tridiagonal(*self._ops_xy, np.moveaxis(theta, 1, 0))
         ay = np.moveaxis(ay, 0, 1)
-        az = _apply_tridiagonal(*self._ops_z, theta)
+        az = self._apply_z(theta, h_top)
         rhs = theta + dt * (ay + az)
         rhs[0] += dt * source_top
         # x sweep: the x axis first
@@ -459,11 +489,11 @@ class WoodPanel:
                                         np.ascontiguousarray(np.moveaxis(rhs, 2, 0))), 0, 2)
         u2 = np.moveaxis(_solve_shifted(*self._ops_xy, dt, np.ascontiguousarray(
             np.moveaxis(u1 - dt * ay, 1, 0))), 0, 1)
-        u3 = _solve_shifted(*self._ops_z, dt, u2 - dt * az)
+        u3 = self._solve_z(dt, u2 - dt * az, h_top)
 
         areas = self.cell_areas
         self.ledger.absorbed += dt * float(np.sum(absorbed * areas))
-        self.ledger.lost_top += dt * float(np.sum((self._h_top * u3[0] + remainder) * areas))
+        self.ledger.lost_top += dt * float(np.sum((h_top * u3[0] + remainder) * areas))
         self.ledger.lost_back += dt * float(np.sum(self._h_back * u3[-1] * areas))
         self.theta = u3
         self._last_absorbed = absorbed
@@ -475,11 +505,11 @@ class WoodPanel:
     def _step_far_field(self, dt, far_irradiance):
         """Backward-Euler step of the 1-D column far from the spot."""
         rho_c = self.wood.volumetric_heat_capacity
-        top = self.far_field[0]
-        rhs = self.far_field.copy()
+        h_top, remainder = self._loss_linearisation(self.far_field[:1])
+        rhs = self.far_field[:, None].copy()
         rhs[0] += dt * (self.wood.absorptance_wood * far_irradiance
-                        - float(self._radiation_remainder(top))) / (rho_c * self.z_widths[0])
-        self.far_field = _solve_shifted(*self._ops_z, dt, rhs)
+                        - remainder) / (rho_c * self.z_widths[0])
+        self.far_field = self._solve_z(dt, rhs, h_top)[:, 0]
 
     def _update_char(self, dt):
         """Advance the char fraction where the surface passed T_p (fine region only)."""

@@ -1,0 +1,70 @@
+"""
+The emulated devices hosted by the simulated world (issue 6, item 8).
+
+The Dobot Magician and the Maestro servo controller run as ``helio_drivers.dobot_emulator``
+and ``helio_drivers.maestro_emulator`` on pseudo-terminals (symlinked at the configured
+paths) so that ``dobot_driver`` and ``servo_driver`` connect to them exactly as to hardware.
+Their motion follows the world's simulated clock; the world reads the true joint positions
+in-process: x = (dobot_j1, dobot_j2, dobot_j3, lens_yaw, lens_pitch) [rad].
+"""
+
+from dataclasses import dataclass
+import math
+
+from helio_drivers.dobot_emulator import DobotEmulator
+from helio_drivers.maestro_emulator import MaestroEmulator
+from helio_drivers.maestro_protocol import ServoCalibration
+import numpy as np
+
+
+@dataclass(frozen=True)
+class DeviceSettings:
+    """Ports, servo wiring and the arm's starting joints."""
+
+    dobot_port: str = '/tmp/helio_sim_dobot'
+    servo_port: str = '/tmp/helio_sim_servo'
+    yaw_channel: int = 0
+    pitch_channel: int = 1
+    servo_us_per_rad: float = 2000.0 / math.pi
+    servo_centre_us: float = 1500.0
+    initial_joints_deg: tuple = (0.0, 30.0, 30.0, 0.0)   # dobot j1..j4 [deg]
+    # the servos start at their centre pulse: lens yaw = lens pitch = 0
+
+
+class SimDevices:
+    """Both emulators on their ptys, moving on the given clock."""
+
+    def __init__(self, clock, settings=None):
+        """Open the two pseudo-terminals and start the emulators' reader threads."""
+        self.settings = settings or DeviceSettings()
+        s = self.settings
+        self.calibrations = (
+            ServoCalibration('lens_yaw', s.yaw_channel, us_per_rad=s.servo_us_per_rad,
+                             centre_pulse_us=s.servo_centre_us),
+            ServoCalibration('lens_pitch', s.pitch_channel, us_per_rad=s.servo_us_per_rad,
+                             centre_pulse_us=s.servo_centre_us))
+        self.dobot = DobotEmulator(port_path=s.dobot_port, clock=clock,
+                                   initial_joints_deg=s.initial_joints_deg)
+        try:
+            self.servo = MaestroEmulator(port_path=s.servo_port, clock=clock,
+                                         calibrations=self.calibrations,
+                                         initial_pulse_us=s.servo_centre_us)
+        except Exception:
+            self.dobot.close()
+            raise
+
+    @property
+    def ports(self):
+        """Return the (dobot, servo) port paths the drivers should open."""
+        return self.dobot.port_path, self.servo.port_path
+
+    def joint_positions(self):
+        """Return x = (j1, j2, j3, lens_yaw, lens_pitch) [rad] at the clock's present time."""
+        arm = self.dobot.joint_positions()
+        wrist = self.servo.joint_positions()
+        return np.array([arm[0], arm[1], arm[2], wrist['lens_yaw'], wrist['lens_pitch']])
+
+    def close(self):
+        """Close both pseudo-terminals and stop the emulators."""
+        self.dobot.close()
+        self.servo.close()

@@ -1,0 +1,327 @@
+"""
+The simulated world, without ROS: sun, lens flux, wood, cameras, clock and canvas (issue 6).
+
+``SimWorld`` ties the parts together. Each ``step()`` advances the simulated clock by
+``step_s``, reads where the rig truly is (the hosted emulators, or any callable returning
+x in R^5), traces the sun through the lens at that pose (re-traced only when something moved),
+heats the wood and chars it. ``thermal_image()`` and ``rgb_image()`` render the cameras at
+their poses on the end effector; ``canvas_image()`` and ``charred_dots()`` give the painting
+and its ground truth, ``write_outputs(dir)`` writes them as ``canvas.png`` and ``dots.csv``.
+
+Nothing here tells the controller what it wants to know: the robot's heading, the sun and
+the lens focus are only visible through the images, as on the real rig.
+"""
+
+from dataclasses import dataclass, field, fields, replace
+import datetime
+import math
+import os
+
+import cv2
+from helio_drivers.sim_cameras import (light_window, RgbCamera, RgbSettings, ThermalCamera,
+                                       ThermalSettings)
+from helio_drivers.sim_clock import SimClock
+from helio_drivers.sim_flux import irradiance_on_cells, lens_pose_in_world, LensFlux
+from helio_drivers.sim_sun import CloudCover, RandomClouds, Sun
+from helio_drivers.sim_wood import GridParameters, WoodPanel, WoodParameters
+from helio_optics.ephemeris import Site
+from helio_optics.geometry import invert_transform
+from helio_optics.lens import LensParameters
+from helio_optics.rig_kinematics import Rig, RigParameters
+import numpy as np
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    """Everything about the world that is not the rig geometry (see config/sim_world.yaml)."""
+
+    latitude_deg: float = 48.137
+    longitude_deg: float = 11.575
+    elevation_m: float = 520.0
+    start_time: str = '2026-06-21T10:00:00+02:00'   # ISO 8601 with its UTC offset
+    robot_heading_deg: float = 200.0     # hidden: compass azimuth of the robot's x axis
+    dni: float = 900.0                   # clear-sky direct normal irradiance [W/m^2]
+    cloud_schedule: tuple = ()           # flat (start_s, end_s, attenuation) triples
+    random_clouds: bool = False
+    cloud_seed: int = 0
+    cloud_mean_clear_s: float = 300.0
+    cloud_mean_cloudy_s: float = 30.0
+    cloud_attenuation_range: tuple = (0.2, 0.7)
+    step_s: float = 0.05                 # simulated time per step [s]
+    seed: int = 0                        # camera noise
+    lens: LensParameters = field(default_factory=lambda: LensParameters(
+        aperture_diameter=0.040, transmission=0.92))
+    flux_rays: int = 30000
+    wood: WoodParameters = field(default_factory=WoodParameters)
+    grid: GridParameters = field(default_factory=GridParameters)
+    panel_extent: tuple = (-0.04, 0.16, -0.04, 0.16)   # x_min, x_max, y_min, y_max [m]
+    marker_side: float = 0.04
+    marker_id: int = 0
+    marker_dictionary: str = 'DICT_4X4_50'
+    rgb: RgbSettings = field(default_factory=RgbSettings)
+    thermal: ThermalSettings = field(default_factory=ThermalSettings)
+
+    def start_datetime(self):
+        """Return the start as an aware datetime (ValueError if the offset is missing)."""
+        when = datetime.datetime.fromisoformat(self.start_time)
+        if when.utcoffset() is None:
+            raise ValueError(f'start_time {self.start_time!r} needs a UTC offset, '
+                             'e.g. 2026-06-21T10:00:00+02:00')
+        return when
+
+    def cloud_cover(self):
+        """Return the CloudCover of the schedule and the optional random process."""
+        process = None
+        if self.random_clouds:
+            process = RandomClouds(seed=self.cloud_seed, mean_clear=self.cloud_mean_clear_s,
+                                   mean_cloudy=self.cloud_mean_cloudy_s,
+                                   attenuation_range=tuple(self.cloud_attenuation_range))
+        return CloudCover.from_flat(self.cloud_schedule, process)
+
+
+@dataclass
+class CharredDot:
+    """One charred dot of the canvas (ground truth): centroid and size in the world frame."""
+
+    x: float          # [m]
+    y: float          # [m]
+    diameter: float   # equivalent diameter 2 sqrt(area / pi) [m]
+    area: float       # [m^2]
+
+
+def settings_from_flat(flat, base=None):
+    """
+    Build SimSettings from flat names ('dni', 'wood.density', 'lens.aperture_diameter', ...).
+
+    Unknown names raise ValueError; angles in the flat form are as named (deg where '_deg').
+    """
+    base = base or SimSettings()
+    groups = {'lens': base.lens, 'wood': base.wood, 'grid': base.grid, 'rgb': base.rgb,
+              'thermal': base.thermal}
+    top, nested = {}, {name: {} for name in groups}
+    top_names = {f.name for f in fields(SimSettings)} - set(groups)
+    for name, value in flat.items():
+        group, _, leaf = name.partition('.')
+        if leaf and group in groups:
+            names = {f.name for f in fields(groups[group])}
+            if leaf not in names:
+                raise ValueError(f'unknown sim parameter {name!r}')
+            nested[group][leaf] = value
+        elif name in top_names:
+            top[name] = tuple(value) if isinstance(value, list) else value
+        else:
+            raise ValueError(f'unknown sim parameter {name!r}')
+    for group, values in nested.items():
+        if values:
+            top[group] = replace(groups[group], **values)
+    return replace(base, **top)
+
+
+def flat_settings(settings):
+    """Return the flat name -> value dict of SimSettings (inverse of settings_from_flat)."""
+    flat = {}
+    for f in fields(SimSettings):
+        value = getattr(settings, f.name)
+        if f.name in ('lens', 'wood', 'grid', 'rgb', 'thermal'):
+            for g in fields(value):
+                flat[f'{f.name}.{g.name}'] = getattr(value, g.name)
+        else:
+            flat[f.name] = list(value) if isinstance(value, tuple) else value
+    return flat
+
+
+class SimWorld:
+    """The simulated world; see the module docstring."""
+
+    def __init__(self, settings=None, rig_parameters=None, joints=None):
+        """
+        Build the world. `joints` is a callable returning x (5,) [rad] at the clock's time.
+
+        Without it, set the joints with ``set_joints`` (tests) or host the emulators
+        (``helio_drivers.sim_devices.SimDevices(world.clock)``) and pass their
+        ``joint_positions``.
+        """
+        self.settings = settings or SimSettings()
+        s = self.settings
+        if not s.step_s > 0.0:
+            raise ValueError(f'step_s must be > 0 s, got {s.step_s}')
+        self.clock = SimClock(s.start_datetime())
+        self.rig = Rig(rig_parameters or RigParameters())
+        self.T_robot_world = self.rig.parameters.T_robot_world
+        self.T_world_robot = invert_transform(self.T_robot_world)
+        self.site = Site(s.latitude_deg, s.longitude_deg, s.elevation_m)
+        self.sun = Sun(self.site, math.radians(s.robot_heading_deg), s.dni, s.cloud_cover(),
+                       self.T_robot_world)
+        self.flux = LensFlux(s.lens, rays=s.flux_rays, seed=s.seed)
+        self.panel = WoodPanel(s.wood, s.grid, s.panel_extent)
+        self.thermal = ThermalCamera(s.thermal)
+        self.rgb = RgbCamera(self.panel.extent, s.grid.fine_cell, s.rgb, s.marker_side,
+                             s.marker_id, s.marker_dictionary, seed=s.seed)
+        self._rng = np.random.default_rng(s.seed)
+        self._joints_source = joints
+        self._x = np.array([0.0, math.radians(30.0), math.radians(30.0), 0.0, 0.0])
+        self._sun_ray = None
+        self._sun_ray_time = -math.inf
+        self._dni = 0.0
+        self._field = None
+        self._irradiance_key = None
+        self._unit_irradiance = None
+        self._light_key = None
+        self._light = None
+        self.steps = 0
+        self._refresh()
+
+    # ------------------------------------------------------------------ state
+    @property
+    def time(self):
+        """Return the simulated seconds since the start."""
+        return self.clock()
+
+    def set_joints(self, x):
+        """Put the rig at x (5,) [rad] (when no joint source is attached)."""
+        self._x = np.asarray(x, dtype=float).reshape(5).copy()
+
+    def joint_positions(self):
+        """Return x (5,) [rad] of the rig now."""
+        if self._joints_source is not None:
+            self._x = np.asarray(self._joints_source(), dtype=float).reshape(5)
+        return self._x.copy()
+
+    def pose(self):
+        """Return the RigPose (robot-frame transforms) at the present joints."""
+        return self.rig.forward(self.joint_positions())
+
+    def camera_poses(self):
+        """Return (T_world_rgb, T_world_thermal) at the present joints."""
+        pose = self.pose()
+        return (self.T_world_robot @ pose.T_robot_rgb, self.T_world_robot @ pose.T_robot_thermal)
+
+    def sun_ray_world(self):
+        """Return the true sun ray s0 in the world frame now (for tests and the demo only)."""
+        return self.sun.ray_world(self.clock.datetime())
+
+    def dni_now(self):
+        """Return the direct normal irradiance now, clouds included [W/m^2]."""
+        return self._dni
+
+    @property
+    def flux_field(self):
+        """Return the FluxField (per unit DNI) of the present lens pose."""
+        return self._field
+
+    # ------------------------------------------------------------------ dynamics
+    def _refresh(self):
+        """Update sun, lens field and irradiance for the present time and joints."""
+        now = self.clock()
+        when = self.clock.datetime()
+        if now - self._sun_ray_time >= 1.0 or self._sun_ray is None:  # pysolar ~0.4 ms/call
+            self._sun_ray = self.sun.ray_world(when)
+            self._sun_ray_time = now
+            self._sun_up = self.sun.position(when).elevation > 0.0
+        self._dni = self.sun.dni * self.sun.clouds.attenuation(now) if self._sun_up else 0.0
+        T_world_lens = lens_pose_in_world(self.T_robot_world, self.pose().T_robot_lens)
+        self._field = self.flux.field(T_world_lens, self._sun_ray)
+        centroid = self._field.centroid()
+        self.panel.follow(centroid)
+        key = (id(self._field), tuple(self.panel.centre))
+        if key != self._irradiance_key:
+            self._unit_irradiance = irradiance_on_cells(self._field, self.panel.x_edges,
+                                                        self.panel.y_edges, 1.0)
+            self._irradiance_key = key
+
+    def step(self):
+        """Advance the world by one step of ``step_s`` simulated seconds."""
+        dt = self.settings.step_s
+        self.clock.advance(dt)
+        self._refresh()
+        self.panel.step(dt, self._dni * self._unit_irradiance,
+                        self._dni * self._field.direct)
+        self.steps += 1
+
+    def run(self, duration):
+        """Step until `duration` more simulated seconds have passed."""
+        end = self.clock() + duration - 1e-9
+        while self.clock() < end:
+            self.step()
+
+    # ------------------------------------------------------------------ sensors
+    def thermal_temperatures(self, noise=True):
+        """Return the thermal camera's read-out [degC] (H, W) at its present pose."""
+        _, T_world_thermal = self.camera_poses()
+        camera = self.thermal if noise else ThermalCamera(
+            replace(self.settings.thermal, noise_sigma=0.0))
+        return camera.temperatures(self.panel, T_world_thermal, self._rng)
+
+    def thermal_image(self):
+        """Return the thermal image, 16UC1 centikelvin (H, W) uint16, with noise."""
+        _, T_world_thermal = self.camera_poses()
+        return self.thermal.image(self.panel, T_world_thermal, self._rng)
+
+    def rgb_image(self):
+        """Return the RGB image (H, W, 3) uint8 at the camera's present pose."""
+        T_world_rgb, _ = self.camera_poses()
+        field = self._field
+        window = self._light_window(field)
+        key = (id(field), window)
+        if key != self._light_key:
+            self._light = None if window is None else light_window(
+                field, self.panel.raster_shape, self.panel.raster_origin,
+                self.panel.grid.fine_cell, self.settings.rgb.diffuse_fraction, window)
+            self._light_key = key
+        self.rgb.update_char(self.panel.char)
+        level = self._dni / max(self.sun.dni, 1e-9)
+        return self.rgb.render(T_world_rgb, self._light, level, self._rng)
+
+    def _light_window(self, field):
+        """Return the panel box holding the lens shadow and the focused spot."""
+        s0 = field.sun_ray
+        if s0[2] >= 0.0:
+            return None
+        centre = field.lens_centre[:2] + (-field.lens_centre[2] / s0[2]) * s0[:2]
+        reach = field.aperture_radius / max(abs(s0[2]), 0.2) + 0.004
+        boxes = [(centre[0] - reach, centre[0] + reach, centre[1] - reach, centre[1] + reach)]
+        if field.points.size:
+            lo, hi = field.points.min(axis=0), field.points.max(axis=0)
+            boxes.append((lo[0] - 0.002, hi[0] + 0.002, lo[1] - 0.002, hi[1] + 0.002))
+        return (min(b[0] for b in boxes), max(b[1] for b in boxes),
+                min(b[2] for b in boxes), max(b[3] for b in boxes))
+
+    # ------------------------------------------------------------------ canvas
+    def canvas_image(self):
+        """Return the char map as a top-view mono8 image (255 bare, 0 char; row 0 at y_max)."""
+        return np.flipud(np.rint(255.0 * (1.0 - self.panel.char))).astype(np.uint8)
+
+    def charred_dots(self, minimum_area=0.05e-6):
+        """Return the CharredDots: connected charred regions, centroid and size (world)."""
+        mask = self.panel.charred_mask().astype(np.uint8)
+        count, _, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        cell = self.panel.grid.fine_cell
+        dots = []
+        for label in range(1, count):
+            area = stats[label, cv2.CC_STAT_AREA] * cell * cell
+            if area < minimum_area:
+                continue
+            column, row = centroids[label]
+            dots.append(CharredDot(x=float(self.panel.raster_origin[0] + (column + 0.5) * cell),
+                                   y=float(self.panel.raster_origin[1] + (row + 0.5) * cell),
+                                   diameter=float(2.0 * math.sqrt(area / math.pi)),
+                                   area=float(area)))
+        return dots
+
+    def write_outputs(self, directory):
+        """Write canvas.png (the char map) and dots.csv (ground truth); return their paths."""
+        os.makedirs(directory, exist_ok=True)
+        png = os.path.join(directory, 'canvas.png')
+        if not cv2.imwrite(png, self.canvas_image()):
+            raise OSError(f'could not write {png}')
+        csv = os.path.join(directory, 'dots.csv')
+        x_min, x_max, y_min, y_max = self.panel.extent
+        with open(csv, 'w') as stream:
+            stream.write(f'# charred dots (char fraction >= {self.panel.wood.charred_fraction}) '
+                         f'in the world frame; canvas.png spans x {x_min:.4f}..{x_max:.4f} m, '
+                         f'y {y_min:.4f}..{y_max:.4f} m, {self.panel.grid.fine_cell:.6f} m/px, '
+                         'row 0 at y_max\n')
+            stream.write('x_m,y_m,diameter_m,area_m2\n')
+            for dot in self.charred_dots():
+                stream.write(f'{dot.x:.6f},{dot.y:.6f},{dot.diameter:.6f},{dot.area:.9f}\n')
+        return png, csv

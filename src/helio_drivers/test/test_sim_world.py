@@ -1,0 +1,90 @@
+"""The simulated world end to end: clouds, determinism, canvas output, hosted devices."""
+
+from dataclasses import replace
+import math
+import os
+
+import cv2
+from helio_drivers.sim_world import settings_from_flat, SimSettings, SimWorld
+from helio_optics.geometry import transform_points
+from helio_optics.rig_kinematics import load_rig_parameters
+import numpy as np
+import pytest
+
+RIG_YAML = os.path.join(os.path.dirname(__file__), '..', '..', 'helio_optics', 'config',
+                        'rig.yaml')
+FAST = SimSettings(flux_rays=8000, step_s=0.1)
+
+
+def rig_parameters():
+    """Return the rig of helio_optics' config (source tree or installed share)."""
+    if os.path.exists(RIG_YAML):
+        return load_rig_parameters(RIG_YAML)
+    from ament_index_python.packages import get_package_share_directory
+    return load_rig_parameters(os.path.join(get_package_share_directory('helio_optics'),
+                                            'config', 'rig.yaml'))
+
+
+def focus_joints(world, target_world, d_lp=0.082):
+    """Joints focusing the TRUE sun on a world target (test shortcut, Eqs 14-15)."""
+    s0_robot = world.sun.ray_robot(world.clock.datetime())
+    target = transform_points(world.T_robot_world, target_world)
+    lens = world.rig.lens_pose_for_target(target, s0_robot, d_lp)
+    assert lens.x is not None, lens.reason
+    return lens.x
+
+
+def test_a_cloud_drops_the_flux_to_its_attenuation_within_one_step():
+    settings = replace(FAST, cloud_schedule=(1.05, 3.0, 0.3))
+    world = SimWorld(settings, rig_parameters())
+    world.set_joints(focus_joints(world, [0.06, 0.06, 0.0]))
+    powers = []
+    for _ in range(12):
+        world.step()
+        powers.append(float(np.sum(world.panel._last_irradiance * world.panel.cell_areas)))
+    # steps end at 0.1 .. 1.2 s: the one ending at 1.1 s is the first under the cloud
+    assert powers[9] == pytest.approx(powers[8], rel=1e-9)
+    assert powers[10] == pytest.approx(0.3 * powers[9], rel=1e-9)
+    assert powers[11] == pytest.approx(powers[10], rel=1e-9)
+
+
+def test_the_world_is_deterministic_for_a_seed():
+    images = []
+    for _ in range(2):
+        world = SimWorld(FAST, rig_parameters())
+        world.set_joints(focus_joints(world, [0.05, 0.07, 0.0]))
+        world.run(1.0)
+        images.append((world.thermal_image(), world.rgb_image()))
+    assert np.array_equal(images[0][0], images[1][0])
+    assert np.array_equal(images[0][1], images[1][1])
+
+
+def test_a_held_focus_chars_a_dot_written_to_the_canvas_outputs(tmp_path):
+    world = SimWorld(FAST, rig_parameters())
+    world.set_joints(focus_joints(world, [0.07, 0.05, 0.0]))
+    world.step()
+    spot = world.flux_field.centroid()
+    world.run(12.0)
+    world.set_joints(focus_joints(world, [0.07, 0.05, 0.0], d_lp=0.112))  # retreat 3 cm
+    world.run(3.0)
+    png, csv = world.write_outputs(str(tmp_path))
+    assert np.array_equal(cv2.imread(png, cv2.IMREAD_UNCHANGED), world.canvas_image())
+    rows = np.loadtxt(csv, delimiter=',', comments='#', skiprows=2, ndmin=2)
+    assert rows.shape == (1, 4)
+    x, y, diameter, _ = rows[0]
+    print(f'dot at ({x * 1e3:.2f}, {y * 1e3:.2f}) mm, light at ({spot[0] * 1e3:.2f}, '
+          f'{spot[1] * 1e3:.2f}) mm, diameter {diameter * 1e3:.2f} mm')
+    assert math.hypot(x - spot[0], y - spot[1]) < 0.3e-3
+    assert 0.5e-3 < diameter < 4e-3
+
+
+def test_flat_parameters_round_trip_and_unknown_names_are_refused():
+    settings = settings_from_flat({'dni': 700.0, 'wood.density': 500.0,
+                                   'lens.aperture_diameter': 0.05,
+                                   'cloud_schedule': [1.0, 2.0, 0.5]})
+    assert settings.dni == 700.0 and settings.wood.density == 500.0
+    assert settings.lens.aperture_diameter == 0.05 and settings.cloud_schedule == (1.0, 2.0, 0.5)
+    with pytest.raises(ValueError, match='unknown sim parameter'):
+        settings_from_flat({'wood.colour': 1.0})
+    with pytest.raises(ValueError, match='UTC offset'):
+        SimWorld(replace(FAST, start_time='2026-06-21T10:00:00'), rig_parameters())
