@@ -1,0 +1,417 @@
+"""
+The ground plane seen by the RGB camera: ArUco marker pose and pixel <-> ground mapping.
+
+Paper Sec. III-C: a pixel ``i_p`` and a world point ``w_p`` satisfy ``s i_p = A [R | t] w_p``
+(Eq 7); on the ground plane z_w = 0 this is the homography ``[x_w y_w 1]^T = (A [r1 r2 t])^-1
+i_p s`` (Eq 8), and a ground point goes to the optics frame by ``T_o_l T_l_c T_c_w`` (Eq 9).
+Here the camera pose comes from one ArUco marker (world frame = marker centre, marker x/y =
+world x/y, z up, as cv2.aruco defines the marker frame), and the mapping uses
+`geometry.PinholeCamera` (rays with OpenCV distortion) and the plane intersection of Eq 6, so
+distortion is handled exactly; `GroundMapping.homography` gives Eq 8's matrix for
+undistorted pixel coordinates.
+
+Marker detection is the expensive step (about 20 ms at 1280x720 here), so `MarkerPoseTracker`
+reuses the last pose while the joint states have not changed, re-detects in a region of
+interest around the last corners when they have, and falls back to the whole frame.
+"""
+
+from dataclasses import dataclass, field
+
+import cv2
+from helio_optics.geometry import (
+    homogeneous, invert_transform, PinholeCamera, transform_points, transform_vectors)
+from helio_perception.ground_render import aruco_dictionary
+import numpy as np
+
+
+@dataclass
+class MarkerPose:
+    """
+    A camera pose from the ArUco marker.
+
+    `T_world_camera` maps rgb optical-frame points into the world; `corners` (4, 2) are the
+    detected marker corners in pixels (cv2.aruco order: top-left, top-right, bottom-right,
+    bottom-left of the marker image); `stamp` [s] of the image it was detected in;
+    `reprojection_error` RMS [px].
+    """
+
+    T_world_camera: np.ndarray
+    corners: np.ndarray
+    stamp: float
+    reprojection_error: float
+    joints: np.ndarray = None
+
+
+@dataclass
+class MarkerResult:
+    """The outcome of one detection attempt: a pose, or None with a reason."""
+
+    pose: MarkerPose = None
+    reason: str = ''
+    detected_now: bool = False
+    searched: str = ''  # 'cache', 'roi' or 'full'
+
+
+def marker_object_points(side):
+    """Return the marker corners in the world frame (4, 3) in cv2.aruco's order [m]."""
+    h = side / 2.0
+    return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+
+
+def camera_from_info(k, d, width, height):
+    """Make a PinholeCamera from CameraInfo's k (9 values), d and size; check them."""
+    matrix = np.asarray(k, dtype=float).reshape(3, 3)
+    if matrix[0, 0] <= 0 or matrix[1, 1] <= 0 or matrix[2, 2] != 1.0:
+        raise ValueError(f'camera matrix is not a valid intrinsic matrix: {matrix.tolist()}')
+    if width <= 0 or height <= 0:
+        raise ValueError(f'camera size {width}x{height} is empty')
+    distortion = np.zeros(5)
+    d = np.asarray(d, dtype=float).ravel()[:5]
+    distortion[:len(d)] = d
+    return PinholeCamera(matrix=matrix, width=int(width), height=int(height),
+                         distortion=distortion)
+
+
+class GroundMapping:
+    """Map pixels to ground points (z = 0 of the world) and back for one camera pose."""
+
+    def __init__(self, camera, T_world_camera):
+        self.camera = camera
+        self.T_world_camera = np.asarray(T_world_camera, dtype=float)
+        self.T_camera_world = invert_transform(self.T_world_camera)
+        self._undistorted = not np.any(np.asarray(camera.distortion))
+        self._ground_from_pixel = np.linalg.inv(self.homography())
+        self.cache = {}  # per-pose values of the users (e.g. the marker mask polygon)
+
+    def pixels_to_ground(self, pixels):
+        """
+        Return world points (N, 3) on z = 0 seen at `pixels` (N, 2) (Eqs 7-8 with distortion).
+
+        Pixels whose ray does not meet the ground in front of the camera get NaN. Without
+        lens distortion this is Eq 8's inverse homography; with distortion the pixel rays of
+        `PinholeCamera.pixel_rays` are intersected with the ground (Eq 6).
+        """
+        pixels = np.asarray(pixels, dtype=float).reshape(-1, 2)
+        if self._undistorted:
+            h = self._ground_from_pixel
+            w = pixels @ h[2, :2] + h[2, 2]
+            with np.errstate(divide='ignore', invalid='ignore'):
+                x = (pixels @ h[0, :2] + h[0, 2]) / w
+                y = (pixels @ h[1, :2] + h[1, 2]) / w
+            # H [x y 1]^T = s [u v 1]^T with s the depth: w = 1 / s > 0 in front
+            behind = ~(w > 0)
+            out = np.stack([x, y, np.zeros_like(x)], axis=-1)
+            out[behind] = np.nan
+            return out
+        rays = transform_vectors(self.T_world_camera, self.camera.pixel_rays(pixels))
+        origin = self.T_world_camera[:3, 3]
+        with np.errstate(divide='ignore', invalid='ignore'):
+            scale = -origin[2] / rays[:, 2]
+        scale = np.where((scale > 0) & np.isfinite(scale), scale, np.nan)
+        return origin + scale[:, None] * rays
+
+    def ground_to_pixels(self, points):
+        """Return the pixels (N, 2) of world points (N, 3) (Eq 7, with distortion)."""
+        return self.camera.project(transform_points(self.T_camera_world, points))
+
+    def homography(self):
+        """
+        Return Eq 8's 3x3 matrix H = A [r1 r2 t] (world (x, y, 1) -> undistorted pixel).
+
+        Its inverse maps undistorted homogeneous pixels to ground points.
+        """
+        rt = self.T_camera_world
+        return self.camera.matrix @ np.column_stack([rt[:3, 0], rt[:3, 1], rt[:3, 3]])
+
+    def to_frame(self, points_world, T_frame_world):
+        """Express world points in another frame (Eq 9: T_o_l T_l_c T_c_w composed)."""
+        return transform_points(T_frame_world, points_world)
+
+
+@dataclass
+class MarkerConfig:
+    """Marker and plausibility parameters (node parameters of spot_detector)."""
+
+    dictionary: str = 'DICT_4X4_50'
+    marker_id: int = 0
+    side: float = 0.04               # black square side [m]
+    max_reprojection_error: float = 1.5   # RMS [px]
+    min_side_pixels: float = 20.0    # smallest plausible marker side in the image [px]
+    min_distance: float = 0.03       # camera distance to the marker, plausible range [m]
+    max_distance: float = 2.0
+    roi_margin: float = 0.5          # ROI around the last corners, as a fraction of their size
+    joint_tolerance: float = 1e-4    # joints closer than this count as unchanged [rad]
+    max_pose_age: float = 0.0        # re-detect after this long even if still [s] (0: never)
+    refine_edges: bool = True        # corners from lines fitted to the marker's outer edges
+    detect_max_width: int = 640      # wider images are downscaled for detection [px] (0: never)
+    roi_side_pixels: int = 80        # ROI re-detection scales the marker to about this [px]
+
+
+class MarkerDetector:
+    """Detect one ArUco marker and compute the camera pose from it (cv2.aruco + IPPE)."""
+
+    def __init__(self, config=None):
+        self.config = config or MarkerConfig()
+        parameters = cv2.aruco.DetectorParameters()
+        parameters.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+        # The default (0.125) drops the marker in favour of a near-duplicate quad when the
+        # white quiet zone around it makes a second nested contour; keep nested candidates
+        # and choose below.
+        parameters.minMarkerDistanceRate = 0.02
+        # keep quads that touch the image border among the rejected candidates: a marker cut
+        # by the border shows up there and is reported as partly visible
+        parameters.minDistanceToBorder = 0
+        self._detector = cv2.aruco.ArucoDetector(
+            aruco_dictionary(self.config.dictionary), parameters)
+        self._object = marker_object_points(self.config.side)
+
+    def detect(self, gray, camera, stamp=0.0, roi=None):
+        """
+        Detect the marker in a grey image (optionally only in roi = (x0, y0, x1, y1)).
+
+        Return a MarkerResult: a pose or a reason (missing, partly visible, implausible).
+        """
+        offset = np.zeros(2)
+        image = gray
+        if roi is not None:
+            x0, y0, x1, y1 = roi
+            image = gray[y0:y1, x0:x1]
+            offset = np.array([x0, y0], dtype=float)
+        # Coarse to fine: the adaptive threshold (windows up to 23 px) loses a marker whose
+        # black border is wider than its window and finds a decoy quad inside the border,
+        # so a larger scale is tried only when the smaller ones fail.
+        limit = self.config.detect_max_width if roi is None else 2 * self.config.roi_side_pixels
+        first = min(1.0, limit / image.shape[1]) if limit > 0 else 1.0
+        wanted = self.config.marker_id
+        seen, near_border = set(), False
+        for scale in (first, first / 2, first / 4):
+            if image.shape[1] * scale < 32 or image.shape[0] * scale < 32:
+                break
+            small = image if scale == 1.0 else cv2.resize(
+                image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+            corners, ids, rejected = self._detector.detectMarkers(small)
+            # pixel centres at integers: x_full = (x_small + 0.5) / scale - 0.5
+            corners = [(c.reshape(-1, 2) + 0.5) / scale - 0.5 + offset for c in corners]
+            rejected = [(c.reshape(-1, 2) + 0.5) / scale - 0.5 + offset for c in rejected]
+            near_border |= any(_cut_marker_like(gray, c, self.config.min_side_pixels)
+                               for c in rejected)
+            ids = [] if ids is None else [int(i) for i in ids.ravel()]
+            seen.update(ids)
+            # the marker's own outline has a black inside and a white outside all round
+            found = [refine_corners_from_edges(gray, c.astype(float), camera)
+                     for c, i in zip(corners, ids) if i == wanted]
+            found = [(c, contrast) for c, contrast in found if contrast > 0]
+            if found:
+                best, _ = max(found, key=lambda item: item[1])
+                if not self.config.refine_edges:
+                    best = min((c for c, i in zip(corners, ids) if i == wanted),
+                               key=lambda c: np.abs(c - best).max()).astype(float)
+                return self.pose_from_corners(best, camera, stamp)
+        if near_border:
+            return MarkerResult(reason=f'marker {wanted} partly visible (cut by the image '
+                                'border)')
+        if wanted in seen:
+            return MarkerResult(reason=f'marker {wanted} implausible: no clean black-to-white '
+                                'outline around the decoded quad')
+        others = sorted(seen - {wanted})
+        extra = f' (saw ids {others})' if others else ''
+        return MarkerResult(reason=f'marker {wanted} not found{extra}')
+
+    def pose_from_corners(self, pixels, camera, stamp=0.0):
+        """Solve the camera pose from the 4 marker corners (IPPE square) and check it."""
+        config = self.config
+        sides = np.linalg.norm(pixels - np.roll(pixels, 1, axis=0), axis=1)
+        if sides.min() < config.min_side_pixels:
+            return MarkerResult(reason=f'marker implausible: side {sides.min():.1f} px is '
+                                f'below {config.min_side_pixels:.1f} px')
+        # IPPE gives both planar solutions (OpenCV 5's is ~0.15 px off near fronto-parallel
+        # views): refine each by Levenberg-Marquardt and keep the better one
+        count, rvecs, tvecs, _ = cv2.solvePnPGeneric(
+            self._object, pixels, camera.matrix, camera.distortion,
+            flags=cv2.SOLVEPNP_IPPE_SQUARE)
+        if not count:
+            return MarkerResult(reason='marker implausible: no pose solves its corners')
+        best = None
+        for rvec, tvec in zip(rvecs, tvecs):
+            rvec, tvec = cv2.solvePnPRefineLM(self._object, pixels, camera.matrix,
+                                              camera.distortion, rvec.copy(), tvec.copy())
+            projected = cv2.projectPoints(self._object, rvec, tvec, camera.matrix,
+                                          camera.distortion)[0].reshape(-1, 2)
+            error = float(np.sqrt(np.mean(np.sum((projected - pixels) ** 2, axis=1))))
+            if best is None or error < best[0]:
+                best = (error, rvec, tvec)
+        _, rvec, tvec = best
+        rotation, _ = cv2.Rodrigues(rvec)
+        T_camera_world = homogeneous(rotation, tvec.ravel())
+        T_world_camera = invert_transform(T_camera_world)
+        projected = camera.project(transform_points(T_camera_world, self._object))
+        error = float(np.sqrt(np.mean(np.sum((projected - pixels) ** 2, axis=1))))
+        distance = float(np.linalg.norm(tvec))
+        height = T_world_camera[2, 3]
+        if error > config.max_reprojection_error:
+            reason = f'reprojection error {error:.2f} px > {config.max_reprojection_error} px'
+        elif height <= 0:
+            reason = f'camera below the ground plane (z = {height:.3f} m)'
+        elif not config.min_distance <= distance <= config.max_distance:
+            reason = (f'camera {distance:.3f} m from the marker, outside '
+                      f'[{config.min_distance}, {config.max_distance}] m')
+        else:
+            pose = MarkerPose(T_world_camera=T_world_camera, corners=pixels, stamp=stamp,
+                              reprojection_error=error)
+            return MarkerResult(pose=pose, detected_now=True)
+        return MarkerResult(reason='marker pose implausible: ' + reason)
+
+
+def refine_corners_from_edges(gray, corners, camera, samples=24, reach=3.0, step=0.25):
+    """
+    Return (corners (4, 2) [px], edge contrast) from lines fitted to the marker's outer edges.
+
+    cv2.cornerSubPix pulls the corners of a blurred dark square inward (about 0.17 px here,
+    which tilts the pose); the straight outer edges are unbiased: along each edge, away from
+    the corners, the half-level crossing of the dark-to-light profile across the edge is
+    found to sub-pixel, the points are undistorted (lines stay lines), a line is fitted to
+    each edge and adjacent lines are intersected. The contrast is the mean grey step from the
+    inside to the outside (high for the real marker outline). Returns the input corners
+    (and contrast 0) if an edge is unusable.
+    """
+    corners = np.asarray(corners, dtype=float)
+    offsets = np.arange(-reach, reach + step / 2, step)
+    lines, contrasts = [], []
+    centre = corners.mean(axis=0)
+    for i in range(4):
+        a, b = corners[i], corners[(i + 1) % 4]
+        along = b - a
+        length = np.linalg.norm(along)
+        if length < 8 * reach:
+            return corners, 0.0
+        normal = np.array([along[1], -along[0]]) / length
+        if np.dot(normal, (a + b) / 2 - centre) < 0:
+            normal = -normal  # outward: from the black border to the white quiet zone
+        t = np.linspace(0.15, 0.85, samples)
+        base = a[None, :] + t[:, None] * along[None, :]
+        grid = base[:, None, :] + offsets[None, :, None] * normal[None, None, :]
+        profiles = cv2.remap(gray, grid[..., 0].astype(np.float32),
+                             grid[..., 1].astype(np.float32), cv2.INTER_LINEAR,
+                             borderMode=cv2.BORDER_REPLICATE).astype(float)
+        dark, light = profiles[:, :3].mean(axis=1), profiles[:, -3:].mean(axis=1)
+        contrasts.append(float(np.mean(light - dark)))
+        level = 0.5 * (dark + light)
+        points = []
+        for k in range(samples):
+            if light[k] - dark[k] < 20:
+                continue
+            above = np.flatnonzero(profiles[k] >= level[k])
+            if len(above) == 0 or above[0] == 0:
+                continue
+            j = above[0]
+            p0, p1 = profiles[k, j - 1], profiles[k, j]
+            s = offsets[j - 1] + step * (level[k] - p0) / (p1 - p0)
+            points.append(base[k] + s * normal)
+        if len(points) < samples // 2:
+            return corners, 0.0
+        rays = camera.pixel_rays(np.array(points))
+        normalised = rays[:, :2] / rays[:, 2:3]
+        mean = normalised.mean(axis=0)
+        _, _, vt = np.linalg.svd(normalised - mean)
+        direction = vt[0]
+        lines.append((mean, direction))
+    refined = []
+    for i in range(4):
+        (p, d), (q, e) = lines[(i - 1) % 4], lines[i]
+        # corner i joins edge i-1 (from corner i-1) and edge i (to corner i+1)
+        matrix = np.column_stack([d, -e])
+        if abs(np.linalg.det(matrix)) < 1e-9:
+            return corners, 0.0
+        s, _ = np.linalg.solve(matrix, q - p)
+        x, y = p + s * d
+        refined.append(camera.project(np.array([x, y, 1.0]))[0])
+    refined = np.array(refined)
+    if np.max(np.linalg.norm(refined - corners, axis=1)) > 2.0:
+        return corners, 0.0  # the fit disagrees with the detector: keep its corners
+    return refined, min(contrasts)
+
+
+def _cut_marker_like(gray, quad, min_side):
+    """Tell whether a rejected quad touches the image border and holds black and white cells."""
+    if not _touches_border(quad, gray.shape, 3.0):
+        return False
+    if cv2.contourArea(quad.astype(np.float32)) < min_side * min_side:
+        return False
+    x, y, w, h = cv2.boundingRect(quad.astype(np.float32))
+    x0, y0 = max(x, 0), max(y, 0)
+    x1, y1 = min(x + w, gray.shape[1]), min(y + h, gray.shape[0])
+    mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    cv2.fillConvexPoly(mask, np.rint(quad - (x0, y0)).astype(np.int32), 1)
+    _, deviation = cv2.meanStdDev(gray[y0:y1, x0:x1], mask=mask)
+    return float(deviation[0, 0]) > 50.0  # binary cells; wood or a spot alone stay far below
+
+
+def _touches_border(points, shape, margin):
+    """Tell whether any point lies within `margin` px of the image border."""
+    height, width = shape[:2]
+    return bool(np.any((points < margin) | (points > np.array([width, height]) - 1 - margin)))
+
+
+@dataclass
+class MarkerPoseTracker:
+    """
+    Keep the camera pose from the marker across frames without re-detecting every time.
+
+    Reuse the last pose while the joint states are unchanged (within `joint_tolerance`) and
+    younger than `max_pose_age`; otherwise re-detect in a region of interest around the last
+    corners, then in the whole frame. Without joint states the ROI is searched every frame.
+    """
+
+    detector: MarkerDetector
+    last: MarkerPose = None
+    counts: dict = field(default_factory=lambda: {'cache': 0, 'roi': 0, 'full': 0,
+                                                  'failed': 0})
+
+    def update(self, gray, camera, stamp, joints=None):
+        """Return a MarkerResult for this image; `joints` the current joint positions."""
+        config = self.detector.config
+        joints = None if joints is None else np.asarray(joints, dtype=float)
+        if self.last is not None and joints is not None and self.last.joints is not None \
+                and joints.shape == self.last.joints.shape \
+                and np.max(np.abs(joints - self.last.joints)) <= config.joint_tolerance \
+                and (config.max_pose_age <= 0 or stamp - self.last.stamp <= config.max_pose_age):
+            self.counts['cache'] += 1
+            return MarkerResult(pose=self.last, searched='cache')
+        result = None
+        if self.last is not None:
+            roi = self._roi(gray.shape)
+            if roi is not None:
+                result = self.detector.detect(gray, camera, stamp, roi)
+                result.searched = 'roi'
+        if result is None or result.pose is None:
+            result = self.detector.detect(gray, camera, stamp)
+            result.searched = 'full'
+        if result.pose is None:
+            self.counts['failed'] += 1
+            if self.last is not None and 'not found' in result.reason:
+                corners = self.last.corners
+                size = np.max(corners.max(axis=0) - corners.min(axis=0))
+                if _touches_border(corners, gray.shape, 0.25 * size):
+                    result.reason = (f'marker {config.marker_id} partly visible or out of view '
+                                     '(last seen at the image border)')
+            return result
+        self.counts[result.searched] += 1
+        result.pose.joints = joints
+        self.last = result.pose
+        return result
+
+    def forget(self):
+        """Drop the cached pose (e.g. when the camera intrinsics change)."""
+        self.last = None
+
+    def _roi(self, shape):
+        corners = self.last.corners
+        low, high = corners.min(axis=0), corners.max(axis=0)
+        margin = self.detector.config.roi_margin * np.max(high - low)
+        height, width = shape[:2]
+        x0, y0 = np.maximum(np.floor(low - margin), 0).astype(int)
+        x1 = int(min(np.ceil(high[0] + margin) + 1, width))
+        y1 = int(min(np.ceil(high[1] + margin) + 1, height))
+        if x1 - x0 < 16 or y1 - y0 < 16:
+            return None
+        return x0, y0, x1, y1

@@ -1,0 +1,84 @@
+"""
+One RGB frame in, one light-spot observation out: marker pose (cached), spot, Eq 10 features.
+
+This is the whole of spot_detector's logic without ROS: `SpotObserver.observe` takes the
+image, the camera, the image stamp, the joint positions (for the pose cache) and optionally
+T_optics_world (for features in the optics frame, Eq 9), and returns an `Observation` that the
+node turns into a helio_msgs/SpotObservation.
+"""
+
+from dataclasses import dataclass, field
+
+from helio_optics.geometry import invert_transform
+from helio_perception.ground_plane import (
+    GroundMapping, MarkerConfig, MarkerDetector, MarkerPoseTracker)
+from helio_perception.spot_detection import (
+    position_features, SpotConfig, SpotDetector, SpotFeatures, SpotResult, to_gray)
+import numpy as np
+
+
+@dataclass
+class Observation:
+    """The outcome for one frame (see SpotObservation.msg)."""
+
+    valid: bool
+    reason: str
+    spot: SpotResult
+    features: SpotFeatures = None
+    T_world_camera: np.ndarray = None
+    marker_pose_age: float = float('nan')
+    marker_search: str = ''
+    stats: dict = field(default_factory=dict)
+
+
+def optics_from_world(T_robot_lens, T_lens_optics, T_robot_world):
+    """Return T_optics_world = (T_robot_lens T_lens_optics)^-1 T_robot_world (Eq 9's chain)."""
+    return invert_transform(T_robot_lens @ T_lens_optics) @ T_robot_world
+
+
+class SpotObserver:
+    """Marker pose tracking plus spot detection, with the ground mapping cached per pose."""
+
+    def __init__(self, marker_config=None, spot_config=None):
+        self.marker_config = marker_config or MarkerConfig()
+        self.tracker = MarkerPoseTracker(MarkerDetector(self.marker_config))
+        self.detector = SpotDetector(spot_config or SpotConfig())
+        self._mapping = None
+        self._mapping_key = None
+
+    def reset(self):
+        """Forget the marker pose and the last spot (e.g. new camera intrinsics)."""
+        self.tracker.forget()
+        self.detector.last_center = None
+        self._mapping = self._mapping_key = None
+
+    def observe(self, image, camera, stamp, joints=None, T_optics_world=None,
+                channel_order='rgb'):
+        """
+        Return the Observation of one image (uint8 mono, rgb/bgr or rgba/bgra).
+
+        `stamp` [s] of the image; `joints` the joint positions when it was taken (None if
+        unknown: the marker is then searched near its last corners every frame).
+        """
+        gray = to_gray(image, channel_order)
+        if gray.shape != (camera.height, camera.width):
+            raise ValueError(f'image is {gray.shape[1]}x{gray.shape[0]} but the camera info '
+                             f'says {camera.width}x{camera.height}')
+        marker = self.tracker.update(gray, camera, stamp, joints)
+        if marker.pose is None:
+            return Observation(valid=False, reason=marker.reason, spot=SpotResult(),
+                               marker_search=marker.searched)
+        pose = marker.pose
+        key = (id(pose), id(camera))
+        if key != self._mapping_key:
+            self._mapping = GroundMapping(camera, pose.T_world_camera)
+            self._mapping_key = key
+        spot = self.detector.detect(gray, self._mapping, self.marker_config.side, stamp)
+        observation = Observation(valid=spot.valid, reason=spot.reason, spot=spot,
+                                  T_world_camera=pose.T_world_camera,
+                                  marker_pose_age=max(0.0, stamp - pose.stamp),
+                                  marker_search=marker.searched)
+        if spot.valid:
+            frame = 'optics' if T_optics_world is not None else 'world'
+            observation.features = position_features(spot, T_optics_world, frame)
+        return observation

@@ -1,0 +1,153 @@
+"""Light-spot detection on synthetic frames with known truth (issue 4 "Done when")."""
+
+import cv2
+from helio_optics.geometry import homogeneous, rotation_z, transform_points
+from helio_perception.ground_render import GroundEllipse, GroundTexture
+from helio_perception.spot_detection import SpotConfig, SpotDetector, to_gray
+from helio_perception.spot_observer import optics_from_world, SpotObserver
+from helio_perception.synthetic_scene import SyntheticScene
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope='module')
+def scene():
+    return SyntheticScene(640, 480)
+
+
+def test_spot_centre_within_0_2_mm_and_area_within_3_percent_over_60_poses(scene):
+    rng = np.random.default_rng(2024)
+    centre_errors, area_errors = [], []
+    for _ in range(60):
+        T_world_camera, (spot,) = scene.random_view(rng)
+        frame = scene.render(T_world_camera, [spot], rng=rng, blur_sigma=0.8, noise_sigma=2.0)
+        observation = SpotObserver().observe(frame.image, scene.camera, stamp=0.0)
+        assert observation.valid, observation.reason
+        centre_errors.append(np.linalg.norm(observation.spot.center[:2] - spot.center))
+        area_errors.append(observation.spot.area / spot.area - 1.0)
+        assert observation.spot.center[2] == 0.0 and observation.marker_pose_age == 0.0
+    assert max(centre_errors) < 2e-4, max(centre_errors)
+    assert max(np.abs(area_errors)) < 0.03, max(np.abs(area_errors))
+
+
+def test_ellipse_axes_orientation_and_contour_match_the_truth(scene):
+    rng = np.random.default_rng(7)
+    T_world_camera, _ = scene.random_view(rng)
+    spot = GroundEllipse(center=(0.05, 0.045), semi_axes=(0.007, 0.004), angle=0.6)
+    frame = scene.render(T_world_camera, [spot], rng=rng)
+    result = SpotObserver().observe(frame.image, scene.camera, 0.0).spot
+    assert result.semi_major == pytest.approx(0.007, rel=0.05)
+    assert result.semi_minor == pytest.approx(0.004, rel=0.05)
+    assert result.orientation == pytest.approx(0.6, abs=0.03)
+    assert result.eccentricity == pytest.approx(np.sqrt(1 - (4 / 7) ** 2), abs=0.03)
+    # every contour point lies on the true ellipse's outline, within a pixel or so
+    c, s = np.cos(0.6), np.sin(0.6)
+    d = result.contour[:, :2] - spot.center
+    u, v = (c * d[:, 0] + s * d[:, 1]) / 0.007, (-s * d[:, 0] + c * d[:, 1]) / 0.004
+    assert np.all(np.abs(np.hypot(u, v) - 1.0) < 0.15)
+    assert result.saturated and result.pixel_count > 100
+
+
+def test_features_in_world_and_optics_frames(scene):
+    rng = np.random.default_rng(8)
+    T_world_camera, (spot,) = scene.random_view(rng)
+    frame = scene.render(T_world_camera, [spot], rng=rng)
+    world = SpotObserver().observe(frame.image, scene.camera, 0.0)
+    assert world.features.frame == 'world'
+    assert world.features.pi == pytest.approx(np.hypot(*spot.center), abs=2e-4)
+    assert world.features.theta == pytest.approx(np.arctan2(spot.center[1], spot.center[0]),
+                                                 abs=5e-3)
+    # an optics frame 8 cm above the spot's neighbourhood, turned 30 degrees about z
+    T_robot_world = homogeneous(translation=(0.15, -0.1, -0.14))
+    T_robot_lens = homogeneous(rotation_z(np.radians(30)), (0.19, -0.05, -0.05))
+    T_lens_optics = homogeneous(translation=(0.0, 0.0, -0.039))
+    T_optics_world = optics_from_world(T_robot_lens, T_lens_optics, T_robot_world)
+    optics = SpotObserver().observe(frame.image, scene.camera, 0.0,
+                                    T_optics_world=T_optics_world)
+    truth = transform_points(T_optics_world, [spot.center[0], spot.center[1], 0.0])
+    assert optics.features.frame == 'optics'
+    assert optics.features.pi == pytest.approx(np.hypot(truth[0], truth[1]), abs=2e-4)
+    assert optics.features.theta == pytest.approx(np.arctan2(truth[1], truth[0]), abs=5e-3)
+
+
+def test_frames_without_marker_or_spot_and_with_two_spots_give_the_reason(scene):
+    rng = np.random.default_rng(31)
+    T_world_camera, spots = scene.random_view(rng, spot_count=2)
+    no_marker = scene.render(T_world_camera, spots, rng=rng, with_marker=False)
+    result = SpotObserver().observe(no_marker.image, scene.camera, 0.0)
+    assert not result.valid and result.reason == 'marker 0 not found'
+    no_spot = scene.render(T_world_camera, [], rng=rng)
+    result = SpotObserver().observe(no_spot.image, scene.camera, 0.0)
+    assert not result.valid and result.reason.startswith('no spot'), result.reason
+    two = scene.render(T_world_camera, spots, rng=rng)
+    result = SpotObserver().observe(two.image, scene.camera, 0.0)
+    assert not result.valid and result.reason.startswith('ambiguous: 2 spot candidates')
+
+
+def test_a_saturated_marker_is_not_taken_for_the_spot(scene):
+    rng = np.random.default_rng(41)
+    T_world_camera, (spot,) = scene.random_view(rng)
+    bright = scene.render(T_world_camera, [], rng=rng, gain=1.15)
+    gray = to_gray(bright.image)
+    assert np.count_nonzero(gray == 255) > 500  # the marker's white cells saturate
+    result = SpotObserver().observe(bright.image, scene.camera, 0.0)
+    assert result.reason.startswith('no spot'), result.reason
+    # with the spot: found, and the marker is what the mask removed
+    lit = scene.render(T_world_camera, [spot], rng=rng, gain=1.15)
+    observer = SpotObserver()
+    result = observer.observe(lit.image, scene.camera, 0.0)
+    assert result.valid, result.reason
+    assert np.linalg.norm(result.spot.center[:2] - spot.center) < 3e-4
+    unmasked = SpotDetector().detect(to_gray(lit.image), observer._mapping, marker_side=None)
+    # without the mask the marker's white shows up as a (rejected) bright region
+    assert sum(unmasked.rejected.values()) > sum(result.spot.rejected.values())
+
+
+def test_the_last_spot_picks_between_two_candidates(scene):
+    rng = np.random.default_rng(51)
+    T_world_camera, (first, second) = scene.random_view(rng, spot_count=2)
+    if np.linalg.norm(np.subtract(first.center, second.center)) < 0.025:
+        second = GroundEllipse((first.center[0], first.center[1] - 0.03), second.semi_axes)
+    observer = SpotObserver()
+    alone = scene.render(T_world_camera, [first], rng=rng)
+    assert observer.observe(alone.image, scene.camera, 1.0).valid
+    both = scene.render(T_world_camera, [first, second], rng=rng)
+    result = observer.observe(both.image, scene.camera, 1.2)
+    assert result.valid and np.linalg.norm(result.spot.center[:2] - first.center) < 3e-4
+    stale = observer.observe(both.image, scene.camera, 10.0)  # the last spot is too old
+    assert not stale.valid and stale.reason.startswith('ambiguous')
+
+
+def test_a_bright_non_elliptical_distractor_is_rejected(scene):
+    rng = np.random.default_rng(61)
+    T_world_camera, (spot,) = scene.random_view(rng)
+    texture = scene.texture
+    paper = GroundTexture(texture.image.copy(), texture.extent)
+    column, row = paper.texture_coordinates(np.array([0.03, 0.08]), np.array([0.012, 0.02]))
+    cv2.rectangle(paper.image, (int(column[0]), int(row[1])), (int(column[1]), int(row[0])),
+                  (255, 255, 255), thickness=-1)  # a white strip, 5 cm x 8 mm
+    image = scene.renderer.render(T_world_camera, paper, [spot], blur_sigma=0.8,
+                                  noise_sigma=2.0, rng=rng)
+    result = SpotObserver().observe(image, scene.camera, 0.0)
+    assert result.valid, result.reason
+    assert np.linalg.norm(result.spot.center[:2] - spot.center) < 3e-4
+    assert result.spot.rejected.get('not elliptical', 0) >= 1
+
+
+def test_bad_configuration_and_image_are_refused(scene):
+    with pytest.raises(ValueError, match='threshold_mode'):
+        SpotDetector(SpotConfig(threshold_mode='adaptive'))
+    with pytest.raises(ValueError, match='8-bit'):
+        to_gray(np.zeros((4, 4), np.uint16))
+    with pytest.raises(ValueError, match='camera info says 640x480'):
+        SpotObserver().observe(np.zeros((10, 10), np.uint8), scene.camera, 0.0)
+
+
+def test_otsu_threshold_mode_finds_the_spot_too(scene):
+    rng = np.random.default_rng(71)
+    T_world_camera, (spot,) = scene.random_view(rng)
+    frame = scene.render(T_world_camera, [spot], rng=rng)
+    observer = SpotObserver(spot_config=SpotConfig(threshold_mode='otsu', min_threshold=200))
+    result = observer.observe(frame.image, scene.camera, 0.0)
+    assert result.valid, result.reason
+    assert np.linalg.norm(result.spot.center[:2] - spot.center) < 2e-4
