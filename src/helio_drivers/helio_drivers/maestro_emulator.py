@@ -68,6 +68,11 @@ class MaestroEmulator(PtyDevice):
         with self._lock:
             return [channel.position(now) / 4.0 for channel in self._channels]
 
+    def target_pulse_widths_us(self):
+        """Return the pulse width every channel is heading for [us] (0 = off)."""
+        with self._lock:
+            return [channel.target_qus / 4.0 for channel in self._channels]
+
     def joint_positions(self):
         """Return the angle [rad] of every calibrated joint now, by name."""
         pulses = self.pulse_widths_us()

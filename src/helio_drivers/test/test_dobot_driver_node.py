@@ -7,84 +7,27 @@ import time
 from helio_drivers.dobot_driver_node import DobotDriverNode
 from helio_drivers.dobot_emulator import DobotEmulator
 from helio_msgs.action import MoveArm
-from helio_msgs.msg import DeviceStatus
 from helio_optics.arm_kinematics import DobotArm
+from node_harness import DriverGraph, wait_for
 import pytest
-import rclpy
-from rclpy.action import ActionClient
-from rclpy.executors import MultiThreadedExecutor
-from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile
-from sensor_msgs.msg import JointState
 
 
-def wait_for(future, timeout=10.0):
-    """Wait on an rclpy future (spun by the executor thread) and return its result."""
-    done = threading.Event()
-    future.add_done_callback(lambda _: done.set())
-    assert done.wait(timeout), 'future not done in time'
-    return future.result()
+class Graph(DriverGraph):
+    """dobot_driver on the emulator's pty with fast motion and short timeouts."""
 
-
-class Graph:
-    """The driver node, a client node and an executor thread in a private context."""
-
-    def __init__(self, emulator, **overrides):
-        self.context = rclpy.context.Context()
-        rclpy.init(context=self.context)
-        parameters = {'port': emulator.port_path, 'timeout_s': 0.1, 'retries': 1,
-                      'joint_state_rate_hz': 50.0, 'status_period_s': 0.2,
-                      'reconnect_initial_s': 0.05, 'reconnect_max_s': 0.2,
-                      'joint_velocity_dps': [200.0] * 4,
-                      'joint_acceleration_dps2': [800.0] * 4}
-        parameters.update(overrides)
-        self.driver = DobotDriverNode(context=self.context, parameter_overrides=[
-            Parameter(k, value=v) for k, v in parameters.items()])
-        self.node = rclpy.create_node('dobot_test_client', context=self.context)
-        self.client = ActionClient(self.node, MoveArm, 'move_arm')
-        self.joint_states = []
-        self.statuses = []
-        self.status_event = threading.Event()
-        self.node.create_subscription(JointState, 'joint_states', self.joint_states.append, 10)
-        self.node.create_subscription(
-            DeviceStatus, 'dobot/status', self._status,
-            QoSProfile(depth=20, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
-        self.executor.add_node(self.driver)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
-        assert self.client.wait_for_server(timeout_sec=10.0)
-
-    def _status(self, message):
-        self.statuses.append(message)
-        self.status_event.set()
-
-    def wait_status(self, predicate, timeout=5.0):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if any(predicate(s) for s in list(self.statuses)):
-                return True
-            self.status_event.clear()
-            self.status_event.wait(0.1)
-        return False
+    def __init__(self, emulator):
+        super().__init__(DobotDriverNode, MoveArm, 'move_arm', 'dobot/status', {
+            'port': emulator.port_path, 'timeout_s': 0.1, 'retries': 1,
+            'joint_state_rate_hz': 50.0, 'status_period_s': 0.2,
+            'reconnect_initial_s': 0.05, 'reconnect_max_s': 0.2,
+            'joint_velocity_dps': [200.0] * 4, 'joint_acceleration_dps2': [800.0] * 4})
 
     def send(self, mode, target, feedback=None):
-        goal = MoveArm.Goal(mode=mode, target=[float(v) for v in target])
-        handle = wait_for(self.client.send_goal_async(goal, feedback_callback=feedback))
-        assert handle.accepted
-        return handle
+        return super().send(MoveArm.Goal(mode=mode, target=[float(v) for v in target]),
+                            feedback)
 
     def move(self, mode, target):
-        handle = self.send(mode, target)
-        return wait_for(handle.get_result_async())
-
-    def close(self):
-        self.executor.shutdown()
-        self.driver.destroy_node()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-        self.thread.join(timeout=5.0)
+        return wait_for(self.send(mode, target).get_result_async())
 
 
 @pytest.fixture

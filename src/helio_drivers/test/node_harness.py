@@ -1,0 +1,83 @@
+"""In-process harness for the driver nodes: private context, client node, executor thread."""
+
+import threading
+import time
+
+import rclpy
+from rclpy.action import ActionClient
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from sensor_msgs.msg import JointState
+
+
+def wait_for(future, timeout=10.0):
+    """Wait on an rclpy future (spun by the executor thread) and return its result."""
+    done = threading.Event()
+    future.add_done_callback(lambda _: done.set())
+    assert done.wait(timeout), 'future not done in time'
+    return future.result()
+
+
+class DriverGraph:
+    """A driver node, a client node (action client + subscriptions) and an executor thread."""
+
+    def __init__(self, node_class, action_type, action_name, status_topic, parameters):
+        from helio_msgs.msg import DeviceStatus
+        self.action_type = action_type
+        self.context = rclpy.context.Context()
+        rclpy.init(context=self.context)
+        try:
+            self.driver = node_class(context=self.context, parameter_overrides=[
+                Parameter(k, value=v) for k, v in parameters.items()])
+            self.node = rclpy.create_node('driver_test_client', context=self.context)
+            self.client = ActionClient(self.node, action_type, action_name)
+            self.joint_states = []
+            self.statuses = []
+            self.status_event = threading.Event()
+            self.node.create_subscription(JointState, 'joint_states', self.joint_states.append,
+                                          10)
+            self.node.create_subscription(
+                DeviceStatus, status_topic, self._status,
+                QoSProfile(depth=20, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+            self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
+            self.executor.add_node(self.driver)
+            self.executor.add_node(self.node)
+            self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+            self.thread.start()
+            assert self.client.wait_for_server(timeout_sec=10.0)
+        except BaseException:
+            rclpy.try_shutdown(context=self.context)
+            raise
+
+    def _status(self, message):
+        self.statuses.append(message)
+        self.status_event.set()
+
+    def wait_status(self, predicate, timeout=5.0):
+        """Wait until a status message satisfies `predicate`; return whether one did."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if any(predicate(s) for s in list(self.statuses)):
+                return True
+            self.status_event.clear()
+            self.status_event.wait(0.1)
+        return False
+
+    def send(self, goal, feedback=None):
+        """Send a goal, assert it was accepted and return its handle."""
+        handle = wait_for(self.client.send_goal_async(goal, feedback_callback=feedback))
+        assert handle.accepted
+        return handle
+
+    def run(self, goal, feedback=None):
+        """Send a goal and return its GetResult response."""
+        return wait_for(self.send(goal, feedback).get_result_async())
+
+    def close(self):
+        """Shut everything down (the driver leaves its device stopped)."""
+        self.executor.shutdown()
+        self.driver.destroy_node()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self.thread.join(timeout=5.0)

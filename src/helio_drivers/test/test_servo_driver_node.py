@@ -1,0 +1,102 @@
+"""servo_driver in-process against the Maestro emulator on a pty."""
+
+import math
+import threading
+import time
+
+from helio_drivers import maestro_protocol as proto
+from helio_drivers.maestro_emulator import MaestroEmulator
+from helio_drivers.servo_driver_node import ServoDriverNode
+from helio_msgs.action import MoveWrist
+from node_harness import DriverGraph, wait_for
+import pytest
+
+# yaw reversed and offset, as a mounted servo may be; pitch on channel 3
+YAW = proto.ServoCalibration('lens_yaw', 0, min_pulse_us=700.0, max_pulse_us=2300.0,
+                             direction=-1, zero_offset_rad=0.1)
+PITCH = proto.ServoCalibration('lens_pitch', 3)
+
+
+@pytest.fixture
+def wrist():
+    emulator = MaestroEmulator(calibrations=[YAW, PITCH])
+    parameters = {'port': emulator.port_path, 'timeout_s': 0.1, 'retries': 1,
+                  'joint_state_rate_hz': 50.0, 'status_period_s': 0.2,
+                  'reconnect_initial_s': 0.05, 'reconnect_max_s': 0.2,
+                  'position_tolerance_us': 0.25,
+                  'yaw.channel': 0, 'yaw.min_pulse_us': 700.0, 'yaw.max_pulse_us': 2300.0,
+                  'yaw.direction': -1, 'yaw.zero_offset_rad': 0.1,
+                  'yaw.speed_us_per_s': 4000.0, 'yaw.acceleration_us_per_s2': 40000.0,
+                  'pitch.channel': 3, 'pitch.speed_us_per_s': 1000.0,
+                  'pitch.acceleration_us_per_s2': 40000.0}
+    graph = DriverGraph(ServoDriverNode, MoveWrist, 'move_wrist', 'servo/status', parameters)
+    try:
+        yield emulator, graph
+    finally:
+        graph.close()
+        emulator.close()
+
+
+def test_wrist_moves_to_calibrated_angles(wrist):
+    emulator, graph = wrist
+    feedback = []
+    response = graph.run(MoveWrist.Goal(yaw=0.4, pitch=-0.3), feedback=feedback.append)
+    assert response.result.success, response.result.message
+    # quarter-microsecond resolution: 0.25 us / 636.6 us/rad ~ 0.0004 rad
+    assert response.result.achieved_yaw == pytest.approx(0.4, abs=1e-3)
+    assert response.result.achieved_pitch == pytest.approx(-0.3, abs=1e-3)
+    # independent: the pulse the emulator outputs follows the calibration formula
+    pulses = emulator.pulse_widths_us()
+    assert pulses[0] == pytest.approx(1500.0 - 0.3 * 2000.0 / math.pi, abs=0.25)
+    assert pulses[3] == pytest.approx(1500.0 - 0.3 * 2000.0 / math.pi, abs=0.25)
+    assert feedback, 'no feedback during the move'
+    assert graph.joint_states and graph.joint_states[-1].name == ['lens_yaw', 'lens_pitch']
+    assert graph.wait_status(lambda s: s.connected and s.device == 'servo')
+
+
+def test_out_of_range_angle_is_refused_naming_the_joint(wrist):
+    emulator, graph = wrist
+    response = graph.run(MoveWrist.Goal(yaw=2.0, pitch=0.0))
+    assert not response.result.success and 'lens_yaw' in response.result.message
+    assert emulator.pulse_widths_us()[0] == pytest.approx(1500.0)
+
+
+def test_cancel_holds_the_servos_mid_move(wrist):
+    emulator, graph = wrist
+    started = threading.Event()
+
+    def on_feedback(message):
+        if message.feedback.current_pitch > 0.1:
+            started.set()
+    handle = graph.send(MoveWrist.Goal(yaw=0.1, pitch=1.5), feedback=on_feedback)
+    assert started.wait(5.0)
+    wait_for(handle.cancel_goal_async())
+    response = wait_for(handle.get_result_async())
+    assert response.status == 5      # GoalStatus.STATUS_CANCELED
+    # the new target is where the servo was when cancelled: it stops there, not at 1.5 rad
+    held = PITCH.angle(emulator.target_pulse_widths_us()[3])
+    assert 0.1 < held < 1.4
+    assert response.result.achieved_pitch == pytest.approx(held, abs=0.05)
+
+
+def test_unplug_aborts_and_reconnects(wrist):
+    emulator, graph = wrist
+    started = threading.Event()
+
+    def on_feedback(message):
+        if message.feedback.current_pitch > 0.1:
+            started.set()
+    handle = graph.send(MoveWrist.Goal(yaw=0.1, pitch=1.5), feedback=on_feedback)
+    result = handle.get_result_async()
+    assert started.wait(5.0)
+    unplugged_at = time.monotonic()
+    emulator.disconnect()
+    response = wait_for(result)
+    assert time.monotonic() - unplugged_at < 0.5
+    assert not response.result.success and 'link lost' in response.result.message
+    response = graph.run(MoveWrist.Goal(yaw=0.0, pitch=0.0))
+    assert not response.result.success and 'not connected' in response.result.message
+    graph.statuses.clear()
+    emulator.reconnect()
+    assert graph.wait_status(lambda s: s.connected)
+    assert graph.run(MoveWrist.Goal(yaw=0.0, pitch=0.0)).result.success
