@@ -53,7 +53,7 @@ class ThermalSettings:
 
     width: int = 160
     height: int = 120
-    horizontal_fov: float = math.radians(57.0)
+    horizontal_fov: float = math.radians(45.0)   # tuned footprint (Lepton 3.5: 57 deg)
     cap: float = 180.9              # read-out upper limit [degC] (paper Sec. IV-B)
     floor: float = -10.0            # read-out lower limit [degC]
     noise_sigma: float = 0.05       # NETD [K]

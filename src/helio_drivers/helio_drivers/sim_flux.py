@@ -80,12 +80,15 @@ class LensFlux:
     """Traces the world's (true) lens and makes irradiance maps on the wood patch."""
 
     def __init__(self, lens=None, rays=30000, seed=0, bands=DEFAULT_BANDS,
-                 move_tolerance=2e-5, angle_tolerance=2e-4):
+                 move_tolerance=2e-5, angle_tolerance=2e-4, beam_spread=0.0):
         """
         Trace `rays` samples of `lens` (LensParameters, design index) in spectral `bands`.
 
-        The map is re-traced when the lens moved more than `move_tolerance` [m] or the lens
-        axis or sun ray turned more than `angle_tolerance` [rad].
+        `beam_spread` [rad] is the standard deviation of a Gaussian angular error added to
+        every ray (per axis): the facet slope and profile errors of a real moulded lens,
+        convolved with the sun's disk as solar ray tracers do. The map is re-traced when
+        the lens moved more than `move_tolerance` [m] or the lens axis or sun ray turned
+        more than `angle_tolerance` [rad].
         """
         self.lens = lens or LensParameters()
         if rays < 100:
@@ -94,7 +97,13 @@ class LensFlux:
         if np.any(weights < 0.0) or weights.sum() <= 0.0:
             raise ValueError('spectral band weights must be >= 0 with a positive sum')
         weights /= weights.sum()
+        if not beam_spread >= 0.0:
+            raise ValueError(f'beam_spread must be >= 0 rad, got {beam_spread}')
         design = area_samples(self.lens, rays, seed)
+        if beam_spread > 0.0:
+            errors = np.random.default_rng(seed + 1).normal(0.0, beam_spread, (2, rays))
+            design = replace(design, disk_u=design.disk_u + errors[0],
+                             disk_v=design.disk_v + errors[1])
         self._bands = []
         sphere_radius = self.lens.sphere_radius
         for (wavelength, _), weight in zip(bands, weights):

@@ -54,8 +54,11 @@ class WoodParameters:
     ambient: float = 25.0               # air and initial panel temperature [degC]
     pyrolysis_temperature: float = 200.0    # T_p, no charring below [degC]
     char_preexponential: float = 1.0e9      # A of the char rate [1/s]
-    char_activation_energy: float = 1.25e5  # E of the char rate [J/mol]
+    char_activation_energy: float = 1.40e5  # E of the char rate [J/mol] (tuned)
     charred_fraction: float = 0.5       # chi above which a pixel counts as charred [-]
+    moisture_content: float = 0.12      # water per dry wood mass (indoor wood 8-12 %) [-]
+    latent_heat: float = 2.26e6         # of evaporating water [J/kg]
+    boiling_temperature: float = 100.0  # where the water evaporates [degC]
 
     def __post_init__(self):
         """Reject values that describe no wood."""
@@ -66,7 +69,7 @@ class WoodParameters:
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f'{name} must be in [0, 1], got {getattr(self, name)}')
         for name in ('convection_top', 'convection_back', 'char_preexponential',
-                     'char_activation_energy'):
+                     'char_activation_energy', 'moisture_content', 'latent_heat'):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
 
@@ -148,12 +151,13 @@ class EnergyLedger:
     absorbed: float = 0.0       # solar power absorbed at the surface, integrated
     lost_top: float = 0.0       # convection and radiation from the surface
     lost_back: float = 0.0      # convection from the back face
+    evaporated: float = 0.0     # latent heat carried away by the wood's evaporated water
     regrid: float = 0.0         # energy change caused by re-centring the patch
     initial_stored: float = 0.0  # heat content above ambient when the ledger started
 
     def residual(self, stored):
         """Return absorbed - lost + regrid - (stored - initial): zero if energy is conserved."""
-        return (self.absorbed - self.lost_top - self.lost_back + self.regrid
+        return (self.absorbed - self.lost_top - self.lost_back - self.evaporated + self.regrid
                 - (stored - self.initial_stored))
 
 
@@ -256,6 +260,9 @@ class WoodPanel:
         n_lateral = len(self._lateral) - 1
         self.theta = np.zeros((len(self.z_widths), n_lateral, n_lateral))  # (z, y, x)
         self.far_field = np.zeros(len(self.z_widths))                      # column theta
+        water = self.wood.moisture_content * self.wood.density                # [kg/m^3]
+        self.moisture = np.full(self.theta.shape, water)      # water left per cell [kg/m^3]
+        self.far_moisture = np.full(len(self.z_widths), water)
         self.time = 0.0
         self.ledger = EnergyLedger()
         self.recentres = 0
@@ -451,6 +458,11 @@ class WoodPanel:
                  + wy * ((1 - wx) * old_theta[:, yy + 1, xx]
                          + wx * old_theta[:, yy + 1, xx + 1]))
         self.theta = np.where(inside[None], moved, self.far_field[:, None, None])
+        old_water = self.moisture
+        water = ((1 - wy) * ((1 - wx) * old_water[:, yy, xx] + wx * old_water[:, yy, xx + 1])
+                 + wy * ((1 - wx) * old_water[:, yy + 1, xx]
+                         + wx * old_water[:, yy + 1, xx + 1]))
+        self.moisture = np.where(inside[None], water, self.far_moisture[:, None, None])
         self._last_absorbed = np.zeros_like(self.cell_areas)
         self._last_irradiance = np.zeros_like(self.cell_areas)
         self.ledger.regrid += self.stored_energy() - before
@@ -496,6 +508,8 @@ class WoodPanel:
         self.ledger.lost_top += dt * float(np.sum((h_top * u3[0] + remainder) * areas))
         self.ledger.lost_back += dt * float(np.sum(self._h_back * u3[-1] * areas))
         self.theta = u3
+        volumes = self.z_widths[:, None, None] * areas[None]
+        self.ledger.evaporated += self._evaporate(self.theta, self.moisture, volumes)
         self._last_absorbed = absorbed
         self._last_irradiance = irradiance
         self._step_far_field(dt, far_irradiance)
@@ -510,6 +524,29 @@ class WoodPanel:
         rhs[0] += dt * (self.wood.absorptance_wood * far_irradiance
                         - remainder) / (rho_c * self.z_widths[0])
         self.far_field = self._solve_z(dt, rhs, h_top)[:, 0]
+        self._evaporate(self.far_field, self.far_moisture, self.z_widths)
+
+    def _evaporate(self, theta, moisture, volumes):
+        """
+        Turn heat above the boiling point into evaporation while water is left (in place).
+
+        The enthalpy method's temperature recovery: a wet cell cannot pass T_boil; its
+        excess sensible heat rho c (T - T_boil) evaporates water (latent heat L) until the
+        cell is dry. Returns the latent heat taken [J] (cells of `volumes` [m^3]).
+        """
+        w = self.wood
+        if w.moisture_content == 0.0:
+            return 0.0
+        rho_c = w.volumetric_heat_capacity
+        boiling = w.boiling_temperature - w.ambient
+        wet = (theta > boiling) & (moisture > 0.0)
+        if not np.any(wet):
+            return 0.0
+        excess = rho_c * (theta[wet] - boiling)                  # [J/m^3]
+        used = np.minimum(excess, moisture[wet] * w.latent_heat)
+        theta[wet] -= used / rho_c
+        moisture[wet] -= used / w.latent_heat
+        return float(np.sum(used * np.broadcast_to(volumes, theta.shape)[wet]))
 
     def _update_char(self, dt):
         """Advance the char fraction where the surface passed T_p (fine region only)."""

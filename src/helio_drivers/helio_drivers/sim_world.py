@@ -50,8 +50,9 @@ class SimSettings:
     step_s: float = 0.05                 # simulated time per step [s]
     seed: int = 0                        # camera noise
     lens: LensParameters = field(default_factory=lambda: LensParameters(
-        aperture_diameter=0.040, transmission=0.92))
+        focal_length=0.081, aperture_diameter=0.038, transmission=0.92))   # tuned
     flux_rays: int = 30000
+    beam_spread: float = 0.004           # lens optical errors, Gaussian sigma [rad] (tuned)
     wood: WoodParameters = field(default_factory=WoodParameters)
     grid: GridParameters = field(default_factory=GridParameters)
     panel_extent: tuple = (-0.04, 0.16, -0.04, 0.16)   # x_min, x_max, y_min, y_max [m]
@@ -152,7 +153,7 @@ class SimWorld:
         self.site = Site(s.latitude_deg, s.longitude_deg, s.elevation_m)
         self.sun = Sun(self.site, math.radians(s.robot_heading_deg), s.dni, s.cloud_cover(),
                        self.T_robot_world)
-        self.flux = LensFlux(s.lens, rays=s.flux_rays, seed=s.seed)
+        self.flux = LensFlux(s.lens, rays=s.flux_rays, seed=s.seed, beam_spread=s.beam_spread)
         self.panel = WoodPanel(s.wood, s.grid, s.panel_extent)
         self.thermal = ThermalCamera(s.thermal)
         self.rgb = RgbCamera(self.panel.extent, s.grid.fine_cell, s.rgb, s.marker_side,

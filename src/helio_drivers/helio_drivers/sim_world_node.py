@@ -62,6 +62,7 @@ PARAMETER_DOCS = {
     'lens.transmission': ('world lens transmission kappa [-]', 0.01, 1.0),
     'lens.facets': ("world lens facets: 'corrected' or 'spherical' (Eq 3)", None, None),
     'flux_rays': ('rays traced per spectral band set', 100, 10 ** 7),
+    'beam_spread': ('world lens optical errors, Gaussian sigma per ray [rad]', 0.0, 0.1),
     'wood.density': ('wood density [kg/m^3]', 50.0, 2000.0),
     'wood.conductivity': ('wood conductivity [W/(m K)]', 0.01, 5.0),
     'wood.specific_heat': ('wood specific heat [J/(kg K)]', 100.0, 5000.0),
@@ -76,6 +77,9 @@ PARAMETER_DOCS = {
     'wood.char_preexponential': ('char rate pre-exponential factor [1/s]', 0.0, 1e20),
     'wood.char_activation_energy': ('char rate activation energy [J/mol]', 0.0, 1e6),
     'wood.charred_fraction': ('char fraction counted as charred [-]', 0.0, 1.0),
+    'wood.moisture_content': ('water per dry wood mass [-]', 0.0, 0.5),
+    'wood.latent_heat': ('latent heat of the water [J/kg]', 0.0, 1e7),
+    'wood.boiling_temperature': ('where the water evaporates [degC]', 50.0, 200.0),
     'grid.fine_cell': ('lateral cell and char pixel size near the spot [m]', 2e-5, 2e-3),
     'grid.fine_half_width': ('half side of the fine region [m]', 1e-3, 0.05),
     'grid.half_width': ('half side of the heat patch [m]', 2e-3, 0.2),
@@ -185,7 +189,7 @@ class SimWorldNode(Node):
                 from ament_index_python.packages import get_package_share_directory
                 rig_file = os.path.join(get_package_share_directory('helio_optics'), 'config',
                                         'rig.yaml')
-            except (ImportError, LookupError) as error:
+            except (ImportError, LookupError, OSError) as error:
                 self.get_logger().warn(f'no helio_optics share ({error}): default rig geometry')
                 return RigParameters()
         return load_rig_parameters(rig_file)

@@ -18,7 +18,7 @@ def heated_panel():
     panel = WoodPanel(extent=(-0.04, 0.06, -0.04, 0.06), centre=(0.01, 0.005))
     x, y = np.meshgrid(panel.x_centres, panel.y_centres)
     r2 = (x - 0.01) ** 2 + (y - 0.005) ** 2
-    spot = 2.0 * 0.5 / (math.pi * 1.5e-3 ** 2) * np.exp(-2.0 * r2 / 1.5e-3 ** 2)
+    spot = 2.0 * 0.8 / (math.pi * 1.5e-3 ** 2) * np.exp(-2.0 * r2 / 1.5e-3 ** 2)
     for _ in range(40):
         panel.step(0.1, spot + 900.0, 900.0)
     return panel

@@ -6,7 +6,8 @@ from helio_drivers.sim_wood import GridParameters, WoodPanel, WoodParameters
 import numpy as np
 import pytest
 
-LOSSLESS = {'convection_top': 0.0, 'convection_back': 0.0, 'emissivity': 0.0}
+LOSSLESS = {'convection_top': 0.0, 'convection_back': 0.0, 'emissivity': 0.0,
+            'moisture_content': 0.0}
 
 
 def disk_irradiance(panel, radius, flux, centre=(0.0, 0.0), samples=8):
@@ -43,7 +44,7 @@ def test_semi_infinite_solid_under_uniform_flux_matches_closed_form():
 def test_steady_disk_source_centre_temperature_matches_closed_form():
     # Semi-infinite solid, uniform flux q on a disk of radius a: centre rise q a / k.
     wood = WoodParameters(thickness=0.04, absorptance_wood=1.0, convection_top=0.0,
-                          convection_back=1e6, emissivity=0.0)
+                          convection_back=1e6, emissivity=0.0, moisture_content=0.0)
     grid = GridParameters(fine_cell=1.25e-4, fine_half_width=2e-3, half_width=0.04,
                           lateral_growth=1.3, top_layer=3e-5, depth_growth=1.3,
                           recentre_margin=0.0)
@@ -80,15 +81,17 @@ def test_energy_balance_over_a_run_with_losses_moves_and_charring():
     for spot in spots:
         panel.follow(spot)
         for _ in range(60):
-            panel.step(0.1, gaussian_irradiance(panel, spot, 0.6, 1.2e-3) + 800.0, 800.0)
+            panel.step(0.1, gaussian_irradiance(panel, spot, 0.8, 1.0e-3) + 800.0, 800.0)
         for _ in range(20):
             panel.step(0.1, np.full(panel.cell_areas.shape, 800.0), 800.0)
     ledger = panel.ledger
     stored = panel.stored_energy() - ledger.initial_stored
     print(f'absorbed {ledger.absorbed:.3f} J, stored {stored:.3f} J, lost top '
-          f'{ledger.lost_top:.3f} J, back {ledger.lost_back:.3f} J, regrid {ledger.regrid:.3f} J')
+          f'{ledger.lost_top:.3f} J, back {ledger.lost_back:.3f} J, evaporated '
+          f'{ledger.evaporated:.3f} J, regrid {ledger.regrid:.3f} J')
     assert panel.recentres >= 1
     assert ledger.lost_top > 0.05 * ledger.absorbed and ledger.lost_back > 0.0
+    assert ledger.evaporated > 0.01 * ledger.absorbed
     assert abs(ledger.residual(panel.stored_energy())) < 0.01 * ledger.absorbed
     assert panel.char.max() > 0.5  # the run was hot enough to char
 
