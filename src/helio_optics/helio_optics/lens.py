@@ -216,10 +216,22 @@ def ring_samples(lens, rings=8, per_ring=64, sun_disk_points=8,
 
 
 def outer_ring_samples(lens, per_ring=64, sun_disk_points=8,
-                       sun_angular_diameter=SUN_ANGULAR_DIAMETER):
-    """Sample the rim only: its projection is the spot's outermost contour (Sec. III-B)."""
+                       sun_angular_diameter=SUN_ANGULAR_DIAMETER, radius_fraction=1.0):
+    """
+    Sample one ring: the rim (its projection is the outermost contour, Sec. III-B).
+
+    ``radius_fraction`` < 1 samples an inner ring instead (r = fraction x aperture radius),
+    whose projection is the contour of a brighter part of the spot.
+    """
+    if not 0.0 < radius_fraction <= 1.0:
+        raise ValueError(f'radius_fraction must be in (0, 1], got {radius_fraction}')
     samples = ring_samples(lens, 1, per_ring, sun_disk_points, sun_angular_diameter)
-    return samples
+    if radius_fraction == 1.0:
+        return samples
+    radius = samples.radius * radius_fraction
+    return LensSamples(lens=lens, facet_sin=facet_sin_polar(lens, radius), radius=radius,
+                       azimuth=samples.azimuth, weight=samples.weight, disk_u=samples.disk_u,
+                       disk_v=samples.disk_v, ring=samples.ring)
 
 
 def area_samples(lens, count=20000, seed=0, sun_angular_diameter=SUN_ANGULAR_DIAMETER):
@@ -263,8 +275,12 @@ class TraceResult:
 
 
 def _perpendicular_basis(direction):
-    """Two unit vectors completing `direction` to a right-handed orthonormal basis."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(direction[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    """Two unit vectors completing unit `direction` (..., 3) to an orthonormal basis."""
+    direction = np.asarray(direction, dtype=float)
+    helper = np.zeros_like(direction)
+    use_x = np.abs(direction[..., 0]) < 0.9
+    helper[..., 0] = use_x
+    helper[..., 1] = ~use_x
     e1 = unit(np.cross(direction, helper))
     return e1, np.cross(direction, e1)
 
@@ -289,7 +305,12 @@ _CHUNK = 8192  # rays per block: keeps the temporaries in cache (several times f
 
 
 def _trace_block(lens, samples, block, s0, e1, e2, p_plane, n_plane):
-    """Trace rays `block` (a slice) in the lens frame; return hit points, masks, directions."""
+    """
+    Trace rays `block` (a slice) in the lens frame; return hit points, masks, directions.
+
+    The sun and plane vectors are indexed by axis first (``s0[0]`` is x) and may hold
+    (K, 1) arrays to trace K lens poses at once (results then have shape (K, N)).
+    """
     u, v = samples.disk_u[block], samples.disk_v[block]
     sx = s0[0] + u * e1[0] + v * e2[0]
     sy = s0[1] + u * e1[1] + v * e2[1]
@@ -317,7 +338,7 @@ def _trace_block(lens, samples, block, s0, e1, e2, p_plane, n_plane):
     w = n * cos_gamma - np.sqrt(np.maximum(root, 0.0))
     s2x, s2y, s2z = n * s1x, n * s1y, w + n * s1z
     ok = ok1 & no_tir
-    tir = int(np.count_nonzero(ok1 & ~no_tir))
+    tir = np.count_nonzero(ok1 & ~no_tir, axis=-1)
     # Eq 6: p_g = p_l2 + K s2 with (p_g - p_g0) . n_g = 0.
     denominator = s2x * n_plane[0] + s2y * n_plane[1] + s2z * n_plane[2]
     hit = ok & (np.abs(denominator) > 1e-15)
@@ -364,7 +385,7 @@ def trace(lens, samples, sun_direction, T_frame_lens=None, plane_point=(0.0, 0.0
         for axis in range(3):
             local[block, axis] = point[axis]
             leaving[block, axis] = direction[axis]
-        tir_count += tir
+        tir_count += int(tir)
     local[~hit] = np.nan
     points = local @ R.T + origin
     directions = leaving @ R.T
@@ -372,3 +393,44 @@ def trace(lens, samples, sun_direction, T_frame_lens=None, plane_point=(0.0, 0.0
     incident = irradiance * cos_beta * float(samples.weight.sum())
     return TraceResult(points=points, power=power, hit=hit, tir_count=tir_count,
                        incident_power=incident, ring=samples.ring, directions=directions)
+
+
+@dataclass
+class BatchTraceResult:
+    """K lens poses traced at once: ``points`` (K, N, 3) in ``frame``, ``hit`` (K, N)."""
+
+    points: np.ndarray
+    hit: np.ndarray
+    tir_count: np.ndarray
+
+
+def trace_batch(lens, samples, sun_directions, T_frame_lens, plane_point=(0.0, 0.0, 0.0),
+                plane_normal=(0.0, 0.0, 1.0)):
+    """
+    Trace the same samples for K (sun direction, lens pose) pairs in one vectorised pass.
+
+    ``sun_directions``: (K, 3) or (3,) in ``frame``; ``T_frame_lens``: (K, 4, 4); the plane
+    (point, normal) is one plane in ``frame`` or (K, 3) arrays. For the estimators' inner
+    loops (few rays, many poses); power is not computed. A pose whose lens faces away from
+    the sun gets no hits.
+    """
+    if samples.lens != lens:
+        raise ValueError('the samples were made for another lens; build them for this one')
+    T = np.asarray(T_frame_lens, dtype=float).reshape(-1, 4, 4)
+    count = T.shape[0]
+    R, origin = T[:, :3, :3], T[:, :3, 3]
+    Rt = np.transpose(R, (0, 2, 1))
+    s_frame = unit(np.broadcast_to(np.asarray(sun_directions, dtype=float), (count, 3)))
+    s0 = np.einsum('kij,kj->ki', Rt, s_frame)
+    n_plane = np.einsum('kij,kj->ki', Rt, unit(np.broadcast_to(
+        np.asarray(plane_normal, dtype=float), (count, 3))))
+    p_plane = np.einsum('kij,kj->ki', Rt, np.broadcast_to(
+        np.asarray(plane_point, dtype=float), (count, 3)) - origin)
+    e1, e2 = _perpendicular_basis(s0)
+    columns = [a.T[:, :, None] for a in (s0, e1, e2, p_plane, n_plane)]
+    point, _, _, hit, tir = _trace_block(lens, samples, slice(None), *columns)
+    hit = hit & (s0[:, 2:3] < 0.0)
+    local = np.stack(np.broadcast_arrays(*point), axis=-1)
+    points = np.einsum('kij,knj->kni', R, local) + origin[:, None, :]
+    points[~hit] = np.nan
+    return BatchTraceResult(points=points, hit=hit, tir_count=np.asarray(tir))

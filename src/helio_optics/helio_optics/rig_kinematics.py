@@ -182,6 +182,8 @@ class Rig:
         """Use the given RigParameters, or the defaults of config/rig.yaml."""
         self.parameters = parameters or RigParameters()
         self.arm = DobotArm(self.parameters.arm)
+        self._T_lens_rgb = self.parameters.T_lens_rgb
+        self._T_lens_thermal = self.parameters.T_lens_thermal
 
     def forward(self, x):
         """Return the RigPose at joints x (5 values) [rad]."""
@@ -194,8 +196,8 @@ class Rig:
         T_pitch_lens = homogeneous(translation=p.lens_offset)
         T_robot_lens = T_robot_flange @ T_flange_yaw @ T_yaw_pitch @ T_pitch_lens
         return RigPose(T_robot_flange=T_robot_flange, T_robot_lens=T_robot_lens,
-                       T_robot_rgb=T_robot_lens @ p.T_lens_rgb,
-                       T_robot_thermal=T_robot_lens @ p.T_lens_thermal,
+                       T_robot_rgb=T_robot_lens @ self._T_lens_rgb,
+                       T_robot_thermal=T_robot_lens @ self._T_lens_thermal,
                        yaw=float(x[0] + x[3]), pitch=float(x[4]))
 
     def inverse(self, position, yaw, pitch, check_limits=True):
