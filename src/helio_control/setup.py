@@ -23,7 +23,6 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'demo = helio_control.demo:main',
         ],
     },
 )
