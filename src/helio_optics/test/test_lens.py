@@ -4,7 +4,8 @@ import math
 
 from helio_optics.geometry import homogeneous, rotation_x, rotation_y, transform_points
 from helio_optics.lens import area_samples, facet_sin_polar, LensParameters, LensSamples
-from helio_optics.lens import paraxial_focus_distance, ring_samples, trace
+from helio_optics.lens import outer_ring_samples, paraxial_focus_distance, ring_samples
+from helio_optics.lens import trace, trace_batch
 import numpy as np
 import pytest
 
@@ -141,3 +142,19 @@ def test_from_sphere_round_trips_the_paper_parameters():
     lens = LensParameters.from_sphere(0.0393, math.radians(40.0))
     assert lens.sphere_radius == pytest.approx(0.0393)
     assert lens.bounding_polar_angle == pytest.approx(math.radians(40.0))
+
+
+def test_batch_trace_equals_one_pose_at_a_time():
+    lens = LensParameters()
+    samples = ring_samples(lens, 2, 16, 2)
+    poses = np.stack([homogeneous(rotation_y(0.2 * k) @ rotation_x(-0.1 * k), [0.01 * k, 0, 0.09])
+                      for k in range(4)])
+    sun = np.array([0.2, -0.1, -1.0])
+    batch = trace_batch(lens, samples, sun, poses)
+    for k in range(4):
+        single = trace(lens, samples, sun, T_frame_lens=poses[k])
+        np.testing.assert_array_equal(batch.hit[k], single.hit)
+        np.testing.assert_allclose(batch.points[k][single.hit], single.points[single.hit],
+                                   atol=1e-14)
+    with pytest.raises(ValueError, match='radius_fraction'):
+        outer_ring_samples(lens, radius_fraction=1.5)
