@@ -81,6 +81,7 @@ class GroundMapping:
         self.T_camera_world = invert_transform(self.T_world_camera)
         self._undistorted = not np.any(np.asarray(camera.distortion))
         self._ground_from_pixel = np.linalg.inv(self.homography())
+        self._ground_from_pixel_det = float(np.linalg.det(self._ground_from_pixel))
         self.cache = {}  # per-pose values of the users (e.g. the marker mask polygon)
 
     def pixels_to_ground(self, pixels):
@@ -109,6 +110,61 @@ class GroundMapping:
             scale = -origin[2] / rays[:, 2]
         scale = np.where((scale > 0) & np.isfinite(scale), scale, np.nan)
         return origin + scale[:, None] * rays
+
+    def grid_to_ground(self, us, vs):
+        """
+        Return ground (x, y) [m] of the pixel grid us x vs as an array (len(vs), len(us), 2).
+
+        The same mapping as `pixels_to_ground` (NaN off the ground), computed by outer
+        products when there is no distortion (the per-frame spot measure uses it).
+        """
+        us, vs = np.asarray(us, dtype=float), np.asarray(vs, dtype=float)
+        if not self._undistorted:
+            grid = np.stack(np.meshgrid(us, vs), axis=-1).reshape(-1, 2)
+            return self.pixels_to_ground(grid)[:, :2].reshape(len(vs), len(us), 2)
+        h = self._ground_from_pixel
+        w = np.add.outer(vs * h[2, 1] + h[2, 2], us * h[2, 0])
+        out = np.empty(w.shape + (2,))
+        with np.errstate(divide='ignore', invalid='ignore'):
+            out[..., 0] = np.add.outer(vs * h[0, 1] + h[0, 2], us * h[0, 0]) / w
+            out[..., 1] = np.add.outer(vs * h[1, 1] + h[1, 2], us * h[1, 0]) / w
+        out[~(w > 0)] = np.nan
+        return out
+
+    def pixel_footprints(self, x0, x1, y0, y1):
+        """
+        Return ground centres (h, w, 2) [m] and areas (h, w) [m^2] of pixels x0..x1-1, y0..y1-1.
+
+        Without distortion the area is Eq 8's Jacobian |det H^-1| / w^3 at the pixel centre
+        (exact to second order in the pixel size); with distortion, the quadrilateral of the
+        pixel's mapped corners. NaN where a pixel does not see the ground.
+        """
+        us, vs = np.arange(x0, x1, dtype=float), np.arange(y0, y1, dtype=float)
+        if self._undistorted:
+            h = self._ground_from_pixel
+            w = np.add.outer(vs * h[2, 1] + h[2, 2], us * h[2, 0])
+            centres = np.empty(w.shape + (2,))
+            with np.errstate(divide='ignore', invalid='ignore'):
+                inverse_w = 1.0 / w
+                centres[..., 0] = np.add.outer(vs * h[0, 1] + h[0, 2], us * h[0, 0]) * inverse_w
+                centres[..., 1] = np.add.outer(vs * h[1, 1] + h[1, 2], us * h[1, 0]) * inverse_w
+                areas = abs(self._ground_from_pixel_det) * inverse_w ** 3
+            behind = ~(w > 0)
+            centres[behind] = np.nan
+            areas[behind] = np.nan
+            return centres, areas
+        corners = self.grid_to_ground(np.arange(x0, x1 + 1) - 0.5, np.arange(y0, y1 + 1) - 0.5)
+        a, b = corners[:-1, :-1], corners[:-1, 1:]
+        c, d = corners[1:, 1:], corners[1:, :-1]
+        ac, bd = c - a, d - b  # quadrilateral area from its diagonals: |ac x bd| / 2
+        areas = 0.5 * np.abs(ac[..., 0] * bd[..., 1] - ac[..., 1] * bd[..., 0])
+        return 0.25 * (a + b + c + d), areas
+
+    def pixel_area(self, u, v):
+        """Return the ground area [m^2] seen by one pixel centred at (u, v) (NaN if none)."""
+        ground = self.pixels_to_ground([[u - 0.5, v], [u + 0.5, v], [u, v - 0.5], [u, v + 0.5]])
+        du, dv = ground[1, :2] - ground[0, :2], ground[3, :2] - ground[2, :2]
+        return float(abs(du[0] * dv[1] - du[1] * dv[0]))
 
     def ground_to_pixels(self, points):
         """Return the pixels (N, 2) of world points (N, 3) (Eq 7, with distortion)."""
@@ -144,7 +200,7 @@ class MarkerConfig:
     max_pose_age: float = 0.0        # re-detect after this long even if still [s] (0: never)
     refine_edges: bool = True        # corners from lines fitted to the marker's outer edges
     detect_max_width: int = 640      # wider images are downscaled for detection [px] (0: never)
-    roi_side_pixels: int = 80        # ROI re-detection scales the marker to about this [px]
+    roi_side_pixels: int = 120       # ROI re-detection scales the marker to about this [px]
 
 
 class MarkerDetector:
@@ -183,7 +239,7 @@ class MarkerDetector:
         limit = self.config.detect_max_width if roi is None else 2 * self.config.roi_side_pixels
         first = min(1.0, limit / image.shape[1]) if limit > 0 else 1.0
         wanted = self.config.marker_id
-        seen, near_border = set(), False
+        seen, rejected_quads = set(), []
         for scale in (first, first / 2, first / 4):
             if image.shape[1] * scale < 32 or image.shape[0] * scale < 32:
                 break
@@ -193,8 +249,7 @@ class MarkerDetector:
             # pixel centres at integers: x_full = (x_small + 0.5) / scale - 0.5
             corners = [(c.reshape(-1, 2) + 0.5) / scale - 0.5 + offset for c in corners]
             rejected = [(c.reshape(-1, 2) + 0.5) / scale - 0.5 + offset for c in rejected]
-            near_border |= any(_cut_marker_like(gray, c, self.config.min_side_pixels)
-                               for c in rejected)
+            rejected_quads.extend(rejected)
             ids = [] if ids is None else [int(i) for i in ids.ravel()]
             seen.update(ids)
             # the marker's own outline has a black inside and a white outside all round
@@ -207,7 +262,7 @@ class MarkerDetector:
                     best = min((c for c, i in zip(corners, ids) if i == wanted),
                                key=lambda c: np.abs(c - best).max()).astype(float)
                 return self.pose_from_corners(best, camera, stamp)
-        if near_border:
+        if any(_cut_marker_like(gray, c, self.config.min_side_pixels) for c in rejected_quads):
             return MarkerResult(reason=f'marker {wanted} partly visible (cut by the image '
                                 'border)')
         if wanted in seen:
@@ -276,45 +331,44 @@ def refine_corners_from_edges(gray, corners, camera, samples=24, reach=3.0, step
     """
     corners = np.asarray(corners, dtype=float)
     offsets = np.arange(-reach, reach + step / 2, step)
-    lines, contrasts = [], []
-    centre = corners.mean(axis=0)
+    starts, ends = corners, np.roll(corners, -1, axis=0)
+    along = ends - starts
+    lengths = np.linalg.norm(along, axis=1)
+    if lengths.min() < 8 * reach:
+        return corners, 0.0
+    normals = np.stack([along[:, 1], -along[:, 0]], axis=1) / lengths[:, None]
+    outward = np.sum(normals * ((starts + ends) / 2 - corners.mean(axis=0)), axis=1) < 0
+    normals[outward] *= -1.0  # outward: from the black border to the white quiet zone
+    t = np.linspace(0.15, 0.85, samples)
+    base = starts[:, None, :] + t[None, :, None] * along[:, None, :]          # (4, S, 2)
+    grid = base[:, :, None, :] + offsets[None, None, :, None] * normals[:, None, None, :]
+    profiles = cv2.remap(gray, grid[..., 0].reshape(4 * samples, -1).astype(np.float32),
+                         grid[..., 1].reshape(4 * samples, -1).astype(np.float32),
+                         cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(float)
+    dark, light = profiles[:, :3].mean(axis=1), profiles[:, -3:].mean(axis=1)
+    level = 0.5 * (dark + light)
+    above = profiles >= level[:, None]
+    first = np.argmax(above, axis=1)
+    rows = np.arange(4 * samples)
+    usable = above[rows, first] & (first > 0) & (light - dark >= 20)
+    first = np.maximum(first, 1)
+    p0, p1 = profiles[rows, first - 1], profiles[rows, first]
+    with np.errstate(divide='ignore', invalid='ignore'):
+        crossing = offsets[first - 1] + step * (level - p0) / (p1 - p0)
+    usable &= np.isfinite(crossing)
+    points = base.reshape(-1, 2) + crossing[:, None] * np.repeat(normals, samples, axis=0)
+    usable = usable.reshape(4, samples)
+    contrasts = (light - dark).reshape(4, samples).mean(axis=1)
+    if np.any(usable.sum(axis=1) < samples // 2):
+        return corners, 0.0
+    rays = camera.pixel_rays(points)
+    normalised = (rays[:, :2] / rays[:, 2:3]).reshape(4, samples, 2)
+    lines = []
     for i in range(4):
-        a, b = corners[i], corners[(i + 1) % 4]
-        along = b - a
-        length = np.linalg.norm(along)
-        if length < 8 * reach:
-            return corners, 0.0
-        normal = np.array([along[1], -along[0]]) / length
-        if np.dot(normal, (a + b) / 2 - centre) < 0:
-            normal = -normal  # outward: from the black border to the white quiet zone
-        t = np.linspace(0.15, 0.85, samples)
-        base = a[None, :] + t[:, None] * along[None, :]
-        grid = base[:, None, :] + offsets[None, :, None] * normal[None, None, :]
-        profiles = cv2.remap(gray, grid[..., 0].astype(np.float32),
-                             grid[..., 1].astype(np.float32), cv2.INTER_LINEAR,
-                             borderMode=cv2.BORDER_REPLICATE).astype(float)
-        dark, light = profiles[:, :3].mean(axis=1), profiles[:, -3:].mean(axis=1)
-        contrasts.append(float(np.mean(light - dark)))
-        level = 0.5 * (dark + light)
-        points = []
-        for k in range(samples):
-            if light[k] - dark[k] < 20:
-                continue
-            above = np.flatnonzero(profiles[k] >= level[k])
-            if len(above) == 0 or above[0] == 0:
-                continue
-            j = above[0]
-            p0, p1 = profiles[k, j - 1], profiles[k, j]
-            s = offsets[j - 1] + step * (level[k] - p0) / (p1 - p0)
-            points.append(base[k] + s * normal)
-        if len(points) < samples // 2:
-            return corners, 0.0
-        rays = camera.pixel_rays(np.array(points))
-        normalised = rays[:, :2] / rays[:, 2:3]
-        mean = normalised.mean(axis=0)
-        _, _, vt = np.linalg.svd(normalised - mean)
-        direction = vt[0]
-        lines.append((mean, direction))
+        edge = normalised[i][usable[i]]
+        mean = edge.mean(axis=0)
+        _, _, vt = np.linalg.svd(edge - mean)
+        lines.append((mean, vt[0]))
     refined = []
     for i in range(4):
         (p, d), (q, e) = lines[(i - 1) % 4], lines[i]
@@ -324,8 +378,8 @@ def refine_corners_from_edges(gray, corners, camera, samples=24, reach=3.0, step
             return corners, 0.0
         s, _ = np.linalg.solve(matrix, q - p)
         x, y = p + s * d
-        refined.append(camera.project(np.array([x, y, 1.0]))[0])
-    refined = np.array(refined)
+        refined.append((x, y, 1.0))
+    refined = camera.project(np.array(refined))
     if np.max(np.linalg.norm(refined - corners, axis=1)) > 2.0:
         return corners, 0.0  # the fit disagrees with the detector: keep its corners
     return refined, min(contrasts)

@@ -211,17 +211,10 @@ class SpotDetector:
                 reject('not convex')
                 continue
             shapes.append((contour, cu, cv, pixels))
-        if not shapes:
-            return [], rejected
-        # ground area of one pixel at each region's centre, all regions in one mapping call
-        probes = np.array([[(cu, cv), (cu + 1.0, cv), (cu, cv + 1.0)] for _, cu, cv, _ in shapes])
-        ground = mapping.pixels_to_ground(probes.reshape(-1, 2)).reshape(-1, 3, 3)
-        du, dv = ground[:, 1, :2] - ground[:, 0, :2], ground[:, 2, :2] - ground[:, 0, :2]
-        pixel_area = np.abs(du[:, 0] * dv[:, 1] - du[:, 1] * dv[:, 0])
         candidates = []
-        for (contour, _, _, pixels), centre, unit_area in zip(shapes, ground[:, 0, :2],
-                                                              pixel_area):
-            area = pixels * unit_area
+        for contour, cu, cv, pixels in shapes:
+            # ground area of the region from the ground area of one pixel at its centre
+            area = pixels * mapping.pixel_area(cu, cv)
             if not np.isfinite(area):
                 reject('off the ground')
             elif area < config.min_area:
@@ -229,7 +222,9 @@ class SpotDetector:
             elif area > config.max_area:
                 reject('too large')
             else:
-                candidates.append((contour, centre))
+                centre = mapping.pixels_to_ground([[cu, cv]])[0, :2] if len(shapes) > 1 \
+                    else None
+                candidates.append((contour, centre, (cu, cv)))
         return candidates, rejected
 
     def _disambiguate(self, candidates, stamp):
@@ -237,7 +232,8 @@ class SpotDetector:
         if self.last_center is None or stamp - self.last_stamp > config.expected_max_age:
             return None
         near = [c for c in candidates
-                if np.linalg.norm(c[1] - self.last_center) <= config.max_jump]
+                if c[1] is not None
+                and np.linalg.norm(c[1] - self.last_center) <= config.max_jump]
         return near[0] if len(near) == 1 else None
 
     def _measure(self, gray, blurred, chosen, mapping, result):
@@ -274,45 +270,33 @@ class SpotDetector:
         # Blur moves the half-level contour inwards where it curves (by pi sigma^2 px^2 in
         # all, the curvature of a closed contour integrating to 2 pi): the light in a narrow
         # band around the contour counts as fractional coverage (I - background) / contrast.
-        coverage = inside.astype(np.float32)
-        measured = inside
         band_width = int(config.edge_band)
         if band_width > 0:
             band = cv2.dilate(inside, _KERNEL, iterations=band_width) \
                 - cv2.erode(inside, _KERNEL, iterations=band_width)
-            band_rows, band_cols = np.nonzero(band)
-            coverage[band_rows, band_cols] = np.clip(
-                (roi[band_rows, band_cols] - np.float32(background)) / np.float32(contrast),
-                -0.5, 1.5)
-            measured = inside | band
-        rows, cols = np.nonzero(measured)
+            fraction = np.clip((roi.astype(np.float32) - np.float32(background))
+                               * np.float32(1.0 / contrast), -0.5, 1.5)
+            coverage = np.where(band > 0, fraction, inside.astype(np.float32))
+        else:
+            coverage = inside.astype(np.float32)
         outline, _ = cv2.findContours(inside, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
         outline = max(outline, key=cv2.contourArea).reshape(-1, 2)
-        # every pixel's ground footprint: the ROI's pixel-corner grid mapped by Eqs 7-8 (one
-        # call with the outline)
-        gh, gw = y1 - y0 + 1, x1 - x0 + 1
-        grid = np.empty((gh * gw + len(outline), 2))
-        grid[:gh * gw, 0] = np.tile(np.arange(x0, x1 + 1) - 0.5, gh)
-        grid[:gh * gw, 1] = np.repeat(np.arange(y0, y1 + 1) - 0.5, gw)
-        grid[gh * gw:] = outline + (x0, y0)
-        mapped = mapping.pixels_to_ground(grid)
-        corners = mapped[:gh * gw, :2].reshape(gh, gw, 2)
-        if np.isnan(corners[rows, cols]).any() or np.isnan(corners[rows + 1, cols + 1]).any():
+        # every pixel's ground centre and footprint area (Eqs 7-8)
+        centres, footprint = mapping.pixel_footprints(x0, x1, y0, y1)
+        if np.isnan(footprint).any():
             result.reason = 'spot not on the ground plane (rays miss it)'
             return
-        a, b = corners[rows, cols], corners[rows, cols + 1]
-        c, d = corners[rows + 1, cols + 1], corners[rows + 1, cols]
-        # quadrilateral area from its diagonals: |(c - a) x (d - b)| / 2
-        ac, bd = c - a, d - b
-        footprint = 0.5 * np.abs(ac[:, 0] * bd[:, 1] - ac[:, 1] * bd[:, 0])
-        weights = footprint * coverage[rows, cols]
-        points = 0.25 * (a + b + c + d)
+        weights = (footprint * coverage).ravel()
+        points = centres.reshape(-1, 2)
         area = float(weights.sum())
+        if not area > 0:
+            result.reason = 'spot has no area on the ground'
+            return
         center = weights @ points / area
         offsets = points - center
         covariance = (offsets * weights[:, None]).T @ offsets / area
         # a pixel's own extent adds its second moment (a square of area s^2: s^2 / 12)
-        covariance += np.eye(2) * float(weights @ footprint) / area / 12.0
+        covariance += np.eye(2) * float(weights @ footprint.ravel()) / area / 12.0
         eigenvalues, eigenvectors = np.linalg.eigh(covariance)
         major = eigenvectors[:, 1]
         orientation = float(np.arctan2(major[1], major[0]))
@@ -327,7 +311,7 @@ class SpotDetector:
         result.semi_minor = float(2.0 * np.sqrt(max(eigenvalues[0], 0.0)))
         result.orientation = orientation
         result.area = area
-        result.contour = mapped[gh * gw:].copy()
+        result.contour = mapping.pixels_to_ground(outline + (x0, y0))
         result.contour[:, 2] = 0.0
         result.pixel_count = count
         saturated = cv2.countNonZero(cv2.inRange(roi, config.saturation_level, 255) & inside)

@@ -1,0 +1,262 @@
+"""
+Benchmarks of helio_perception: ``python -m helio_perception.bench --json PATH``.
+
+Prints the figures and writes them as flat JSON (units in the keys):
+
+- spot detection per frame (grey conversion to observation, marker pose known) at 640x480
+  and 1280x720, and in the same run the bare OpenCV calls it wraps (cvtColor, GaussianBlur,
+  threshold, findContours, fitEllipse), medians and their ratio;
+- marker detection per frame: whole frame, and the re-detection in the ROI around the last
+  corners (what a moving camera costs);
+- thermal statistics per 160x120 frame (16UC1 and 32FC1);
+- end to end: a spot_detector node in its own process, 640x480 rgb8 images published at
+  30 Hz, latency from publishing each image to receiving its observation (median, p95,
+  max) and the frames that never got an observation.
+
+Targets (issue 4, this machine): spot detection <= 2 ms at 1280x720 and within 2x of the bare
+calls; thermal statistics <= 0.5 ms; end-to-end latency <= 15 ms with no drops at 30 Hz.
+"""
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+import cv2
+from helio_perception.ground_plane import GroundMapping, MarkerDetector
+from helio_perception.spot_detection import SpotDetector, to_gray
+from helio_perception.synthetic_scene import SyntheticScene
+from helio_perception.thermal import ThermalAnalyzer
+import numpy as np
+
+
+def median_ms(function, repeats):
+    """Return the median wall time of `function()` over `repeats` calls [ms]."""
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        function()
+        times.append(time.perf_counter() - start)
+    return 1e3 * float(np.median(times))
+
+
+def bare_opencv(image, threshold=220.0, kernel=5):
+    """Run the OpenCV calls spot detection wraps, nothing else."""
+    gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    blurred = cv2.GaussianBlur(gray, (kernel, kernel), 0)
+    _, binary = cv2.threshold(blurred, threshold, 255, cv2.THRESH_BINARY)
+    contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    return [cv2.fitEllipse(c) for c in contours if len(c) >= 5]
+
+
+def bench_spot_and_marker(width, height, repeats, figures):
+    """Time spot detection (pose known), the bare calls and marker detection at one size."""
+    scene = SyntheticScene(width, height, supersample=1)
+    rng = np.random.default_rng(1)
+    T_world_camera, spots = scene.random_view(rng)
+    image = scene.render(T_world_camera, spots, rng=rng).image
+    detector = MarkerDetector()
+    marker = detector.detect(to_gray(image), scene.camera)
+    if marker.pose is None:
+        raise RuntimeError(f'benchmark frame: {marker.reason}')
+    mapping = GroundMapping(scene.camera, marker.pose.T_world_camera)
+    spot = SpotDetector()
+
+    def detect():
+        result = spot.detect(to_gray(image), mapping, scene.marker_side)
+        if not result.valid:
+            raise RuntimeError(f'benchmark frame: {result.reason}')
+
+    # interleave the two so that both see the same load on the machine
+    ours, bare = [], []
+    for _ in range(5):
+        ours.append(median_ms(detect, repeats // 5))
+        bare.append(median_ms(lambda: bare_opencv(image), repeats // 5))
+    size = f'{width}x{height}'
+    figures[f'spot_detect_{size}_ms_median'] = float(np.median(ours))
+    figures[f'spot_bare_opencv_{size}_ms_median'] = float(np.median(bare))
+    figures[f'spot_detect_over_bare_{size}_ratio'] = float(np.median(ours) / np.median(bare))
+    gray = to_gray(image)
+    figures[f'marker_detect_full_{size}_ms_median'] = median_ms(
+        lambda: detector.detect(gray, scene.camera), max(repeats // 10, 10))
+    corners = marker.pose.corners
+    low, high = corners.min(axis=0), corners.max(axis=0)
+    margin = 0.5 * np.max(high - low)
+    x0, y0 = np.maximum(np.floor(low - margin), 0).astype(int)
+    x1, y1 = np.minimum(np.ceil(high + margin), [width, height]).astype(int)
+    figures[f'marker_detect_roi_{size}_ms_median'] = median_ms(
+        lambda: detector.detect(gray, scene.camera, roi=(x0, y0, x1, y1)),
+        max(repeats // 10, 10))
+
+
+def bench_thermal(repeats, figures):
+    """Time thermal statistics on a 160x120 frame."""
+    rng = np.random.default_rng(2)
+    raw = (29815 + rng.normal(0, 5, (120, 160))).astype(np.uint16)
+    raw[50:60, 70:80] = 45405
+    celsius = (raw / 100.0 - 273.15).astype(np.float32)
+    analyzer = ThermalAnalyzer()
+    analyzer.statistics(raw, '16UC1')
+    figures['thermal_stats_160x120_16UC1_ms_median'] = median_ms(
+        lambda: analyzer.statistics(raw, '16UC1'), repeats)
+    figures['thermal_stats_160x120_32FC1_ms_median'] = median_ms(
+        lambda: analyzer.statistics(celsius, '32FC1'), repeats)
+
+
+def dds_profile():
+    """Return the path of the package's Fast DDS profile for large images (or None)."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        path = os.path.join(get_package_share_directory('helio_perception'), 'config',
+                            'fastdds_large_images.xml')
+    except (ImportError, LookupError):
+        return None
+    return path if os.path.exists(path) else None
+
+
+def bench_end_to_end(width, height, rate, seconds, figures, profile=True):
+    """Run spot_detector in a subprocess, publish images at `rate`, time the observations."""
+    import rclpy
+    from helio_msgs.msg import SpotObservation
+    from helio_optics.rig_kinematics import JOINT_NAMES
+    from helio_perception.image_conversion import numpy_to_image
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import CameraInfo, Image, JointState
+
+    scene = SyntheticScene(width, height, supersample=1)
+    rng = np.random.default_rng(3)
+    T_world_camera, (spot,) = scene.random_view(rng)
+    frames = []
+    for k in range(10):  # the spot wanders a little, the camera is still
+        moved = type(spot)((spot.center[0] + 0.0005 * k, spot.center[1]), spot.semi_axes,
+                           spot.angle)
+        frames.append(numpy_to_image(scene.render(T_world_camera, [moved], rng=rng).image,
+                                     'rgb8'))
+    environment = dict(os.environ)
+    environment.setdefault('ROS_DOMAIN_ID', str(150 + os.getpid() % 80))
+    path = dds_profile() if profile else None
+    if path and 'FASTRTPS_DEFAULT_PROFILES_FILE' not in environment:
+        environment['FASTRTPS_DEFAULT_PROFILES_FILE'] = path
+    for name in ('ROS_DOMAIN_ID', 'FASTRTPS_DEFAULT_PROFILES_FILE'):
+        if name in environment:
+            os.environ[name] = environment[name]
+    print(f'end to end: Fast DDS profile '
+          f"{environment.get('FASTRTPS_DEFAULT_PROFILES_FILE', '(none: the defaults)')}")
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'helio_perception.spot_detector_node', '--ros-args',
+         '-p', 'diagnostics_period:=0.0', '-p', 'features_in_optics_frame:=false',
+         '--log-level', 'warn'], env=environment)
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('perception_bench', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    sent, latencies, invalid = {}, [], []
+
+    def on_spot(msg):
+        key = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+        if key in sent:
+            latencies.append(time.perf_counter() - sent.pop(key))
+            if not msg.valid:
+                invalid.append(msg.reason)
+
+    node.create_subscription(SpotObservation, 'spot', on_spot, 100)
+    images = node.create_publisher(Image, 'rgb/image_raw', qos_profile_sensor_data)
+    infos = node.create_publisher(CameraInfo, 'rgb/camera_info', qos_profile_sensor_data)
+    joints = node.create_publisher(JointState, 'joint_states', 10)
+    info = CameraInfo()
+    info.width, info.height = width, height
+    info.k = [float(v) for v in scene.camera.matrix.ravel()]
+    info.d = [0.0] * 5
+    state = JointState()
+    state.name, state.position = list(JOINT_NAMES), [0.0] * 5
+    try:
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline and (images.get_subscription_count() == 0
+                                               or node.count_publishers('spot') == 0):
+            executor.spin_once(timeout_sec=0.05)
+        if images.get_subscription_count() == 0:
+            raise RuntimeError('spot_detector did not start within 30 s')
+        # warm up: camera info, joints, the first (full) marker detection
+        for _ in range(20):
+            infos.publish(info)
+            joints.publish(state)
+            executor.spin_once(timeout_sec=0.05)
+        warm = frames[0]
+        warm.header.stamp = node.get_clock().now().to_msg()
+        sent[(warm.header.stamp.sec, warm.header.stamp.nanosec)] = time.perf_counter()
+        images.publish(warm)
+        while sent and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        latencies.clear()
+        invalid.clear()
+        sent.clear()
+        count = int(rate * seconds)
+        period = 1.0 / rate
+        start = time.perf_counter()
+        for k in range(count):
+            due = start + k * period
+            while time.perf_counter() < due:
+                executor.spin_once(timeout_sec=max(0.0, due - time.perf_counter()))
+            msg = frames[k % len(frames)]
+            msg.header.stamp = node.get_clock().now().to_msg()
+            sent[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = time.perf_counter()
+            images.publish(msg)
+            if k % 30 == 0:
+                joints.publish(state)
+        tail = time.perf_counter() + 2.0
+        while sent and time.perf_counter() < tail:
+            executor.spin_once(timeout_sec=0.02)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        process.terminate()
+        try:
+            process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+    size = f'{width}x{height}'
+    values = np.array(latencies) * 1e3
+    figures[f'e2e_{size}_{rate:g}hz_frames_sent'] = int(rate * seconds)
+    figures[f'e2e_{size}_{rate:g}hz_frames_dropped'] = len(sent)
+    figures[f'e2e_{size}_{rate:g}hz_observations_invalid'] = len(invalid)
+    if len(values):
+        figures[f'e2e_{size}_{rate:g}hz_latency_ms_median'] = float(np.median(values))
+        figures[f'e2e_{size}_{rate:g}hz_latency_ms_p95'] = float(np.percentile(values, 95))
+        figures[f'e2e_{size}_{rate:g}hz_latency_ms_max'] = float(values.max())
+
+
+def main(argv=None):
+    """Run the benchmarks, print the figures and write them as JSON."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--json', metavar='PATH', help='write the figures here')
+    parser.add_argument('--repeats', type=int, default=200, help='timed calls per figure')
+    parser.add_argument('--e2e-seconds', type=float, default=10.0,
+                        help='duration of the end-to-end run [s] (0: skip it)')
+    parser.add_argument('--no-dds-profile', action='store_true',
+                        help="run end to end with Fast DDS's default transports")
+    args = parser.parse_args(argv)
+    figures = {}
+    for width, height in ((640, 480), (1280, 720)):
+        bench_spot_and_marker(width, height, args.repeats, figures)
+    bench_thermal(args.repeats * 5, figures)
+    if args.e2e_seconds > 0:
+        bench_end_to_end(640, 480, 30.0, args.e2e_seconds, figures,
+                         profile=not args.no_dds_profile)
+    for name, value in figures.items():
+        print(f'{name:48s} {value:10.3f}' if isinstance(value, float) else
+              f'{name:48s} {value:10d}')
+    if args.json:
+        with open(args.json, 'w') as stream:
+            json.dump(figures, stream, indent=2, sort_keys=True)
+            stream.write('\n')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

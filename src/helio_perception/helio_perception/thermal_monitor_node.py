@@ -1,0 +1,155 @@
+"""
+Node thermal_monitor: pyrolysis statistics of each thermal image (paper Sec. IV-B, Fig. 8).
+
+Subscribes (sensor-data QoS) ``/thermal/image_raw`` (16UC1 centikelvin as a radiometric
+FLIR Lepton sends it, 32FC1 degC, or mono16 with a linear calibration) and
+``/thermal/camera_info``; (reliable) ``/joint_states``. Publishes (reliable)
+``/thermal/stats`` (helio_msgs/ThermalStats: T_max, N_p at or above T_p, the hottest pixel
+and, when the thermal camera's pose is known from the joints and the rig kinematics, the
+ground point it sees; saturated when T_max is at the camera cap) and ``/diagnostics``.
+
+The statistics are `helio_perception.thermal.ThermalAnalyzer`; parameters in
+config/thermal_monitor.yaml. A malformed frame is logged with its reason and skipped.
+"""
+
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import Point
+from helio_msgs.msg import ThermalStats
+from helio_optics.geometry import invert_transform
+from helio_perception.frame_statistics import FrameStatistics
+from helio_perception.ground_plane import camera_from_info, GroundMapping
+from helio_perception.image_conversion import image_to_numpy, ImageConversionError
+from helio_perception.node_support import (
+    declare, diagnostics, JointCache, load_rig, stamp_seconds)
+from helio_perception.thermal import ThermalAnalyzer, ThermalConfig
+import numpy as np
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import CameraInfo, Image, JointState
+
+
+class ThermalMonitorNode(Node):
+    """Publish ThermalStats for every thermal image."""
+
+    def __init__(self, **kwargs):
+        super().__init__('thermal_monitor', **kwargs)
+        config = ThermalConfig(
+            threshold=declare(self, 'threshold', 180.9,
+                              'Pyrolysis threshold T_p for N_p [degC] (paper: the camera cap '
+                              '180.9).', -273.15, 2000.0),
+            camera_cap=declare(self, 'camera_cap', 180.9,
+                               'Read-out cap of the thermal camera [degC].', -273.15, 2000.0),
+            saturation_tolerance=declare(self, 'saturation_tolerance', 0.05,
+                                         'T_max within this of the cap is saturated [K].',
+                                         0.0, 100.0),
+            mono16_gain=declare(self, 'mono16.gain', 0.01,
+                                'mono16 calibration: degC per count.', 1e-9, 100.0),
+            mono16_offset=declare(self, 'mono16.offset', -273.15,
+                                  'mono16 calibration: degC at count 0.', -1000.0, 1000.0))
+        self.analyzer = ThermalAnalyzer(config)
+        self.locate_hottest = declare(
+            self, 'locate_hottest_point', True,
+            'Map the hottest pixel to the ground (needs /thermal/camera_info, /joint_states '
+            'and the rig kinematics).')
+        self.joint_state_timeout = declare(
+            self, 'joint_state_timeout', 1.0,
+            'Joint states older than this are not used (0: any age) [s].', 0.0, 3600.0)
+        rig_file = declare(self, 'rig_file', '',
+                           "Rig geometry YAML (empty: helio_optics' config/rig.yaml).")
+        self.rig = load_rig(self, rig_file) if self.locate_hottest else None
+        self.frame_id = declare(self, 'frame_id', 'thermal',
+                                'frame_id of /thermal/stats (the thermal optical frame).')
+        self.diagnostics_period = declare(self, 'diagnostics_period', 1.0,
+                                          'Period of /diagnostics [s].', 0.0, 3600.0)
+        self.stats = FrameStatistics()
+        self.joints = JointCache()
+        self.camera = None
+        self.stats_pub = self.create_publisher(
+            ThermalStats, 'thermal/stats',
+            QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_subscription(Image, 'thermal/image_raw', self.on_image,
+                                 qos_profile_sensor_data)
+        self.create_subscription(CameraInfo, 'thermal/camera_info', self.on_camera_info,
+                                 qos_profile_sensor_data)
+        self.create_subscription(JointState, 'joint_states', self.joints.update, 50)
+        if self.diagnostics_period > 0:
+            self.create_timer(self.diagnostics_period, self.publish_diagnostics)
+        self.get_logger().info(f'thermal_monitor: T_p {config.threshold} degC, cap '
+                               f'{config.camera_cap} degC')
+
+    def on_camera_info(self, msg):
+        """Keep the thermal intrinsics (for the hottest pixel's ground point)."""
+        try:
+            self.camera = camera_from_info(msg.k, msg.d, msg.width, msg.height)
+        except ValueError as error:
+            self.get_logger().warn(f'ignoring /thermal/camera_info: {error}',
+                                   throttle_duration_sec=5.0)
+
+    def on_image(self, msg):
+        """Compute and publish the statistics of one thermal image."""
+        started = time.perf_counter()
+        self.stats.frame(stamp_seconds(msg.header.stamp))
+        try:
+            image = image_to_numpy(msg)
+            result = self.analyzer.statistics(image, msg.encoding)
+        except (ImageConversionError, ValueError) as error:
+            self.stats.bad_frame(str(error))
+            self.get_logger().warn(f'thermal image skipped: {error}', throttle_duration_sec=2.0)
+            return
+        out = ThermalStats()
+        out.header.stamp = msg.header.stamp
+        out.header.frame_id = msg.header.frame_id or self.frame_id
+        out.t_max, out.threshold, out.n_p = result.t_max, result.threshold, result.n_p
+        out.hottest_u, out.hottest_v = result.hottest_u, result.hottest_v
+        out.saturated, out.camera_cap = result.saturated, result.camera_cap
+        point = self.hottest_ground_point(result.hottest_u, result.hottest_v, image.shape)
+        if point is not None:
+            out.hottest_point_valid = True
+            out.hottest_point = Point(x=float(point[0]), y=float(point[1]), z=0.0)
+        self.stats_pub.publish(out)
+        self.stats.result(True, milliseconds=(time.perf_counter() - started) * 1e3)
+
+    def hottest_ground_point(self, u, v, shape):
+        """Return the world ground point seen by pixel (u, v), or None if the pose is unknown."""
+        if self.rig is None or self.camera is None:
+            return None
+        if (self.camera.height, self.camera.width) != tuple(shape):
+            return None
+        joints = self.joints.positions(self.joint_state_timeout)
+        if joints is None:
+            return None
+        pose = self.rig.forward(joints)
+        T_world_robot = invert_transform(self.rig.parameters.T_robot_world)
+        mapping = GroundMapping(self.camera, T_world_robot @ pose.T_robot_thermal)
+        point = mapping.pixels_to_ground([[u, v]])[0]
+        return None if np.any(np.isnan(point)) else point
+
+    def publish_diagnostics(self):
+        """Publish the frame counters on /diagnostics."""
+        self.diagnostics_pub.publish(diagnostics(self, 'thermal_monitor: frames',
+                                                 self.stats.as_dict(),
+                                                 self.get_clock().now().to_msg()))
+
+
+def main(args=None):
+    """Run the thermal_monitor node."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = ThermalMonitorNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()
