@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import cv2
 from helio_drivers.sim_flux import lens_pose_in_world
 from helio_optics.geometry import transform_points
+from helio_perception.thermal import ThermalAnalyzer, ThermalConfig
 import numpy as np
 
 
@@ -77,6 +78,7 @@ def char_experiment(world, target_world=(0.07, 0.07, 0.0), d_lp=0.082, retreat=0
                     np_threshold=30, timeout=60.0, thermal_rate=8.7):
     """Heat one dot as Algorithm 1 does and return its CharFigures (see the module docstring)."""
     cap = world.settings.thermal.cap
+    thermal = ThermalAnalyzer(ThermalConfig(threshold=cap, camera_cap=cap))  # T_p = cap
     world.set_joints(aim(world, target_world, d_lp))
     start = world.time
     next_frame = start
@@ -89,8 +91,9 @@ def char_experiment(world, target_world=(0.07, 0.07, 0.0), d_lp=0.082, retreat=0
         if world.time + 1e-9 < next_frame:
             continue
         next_frame += 1.0 / thermal_rate
-        read_out = world.thermal_temperatures(noise=False)
-        n_p = int(np.count_nonzero(read_out >= cap - 1e-6))
+        read_out = world.thermal_temperatures(noise=False).astype(np.float32)
+        stats = thermal.statistics(read_out, '32FC1')
+        n_p = stats.n_p
         if np.isnan(retreat_time):
             if n_p >= np_threshold:
                 figures.time_to_np = world.time - start
@@ -98,7 +101,7 @@ def char_experiment(world, target_world=(0.07, 0.07, 0.0), d_lp=0.082, retreat=0
                 world.set_joints(aim(world, target_world, d_lp + retreat))
                 retreat_time = world.time
             continue
-        if np.isnan(figures.cap_hold_after_retreat) and read_out.max() < cap - 1e-6:
+        if np.isnan(figures.cap_hold_after_retreat) and not stats.saturated:
             figures.cap_hold_after_retreat = world.time - retreat_time
         if n_p == 0:
             figures.time_to_np_zero = world.time - retreat_time

@@ -115,22 +115,30 @@ class RgbCamera:
         self.pixel_size = float(pixel_size)
         self._wood = texture.image.astype(np.float32)     # rows from y_max down (top view)
         self._albedo = GroundTexture(image=self._wood.copy(), extent=self.extent)
-        self._char_seen = np.zeros(self._wood.shape[:2])   # char raster (rows from y_min)
         self._char_rgb = np.asarray(CHAR_RGB, np.float32)
+        # Sensor noise: a bank of Gaussian frames drawn once (seeded); each image adds one of
+        # them, circularly shifted by a random offset (cheap, and never the same twice).
+        bank_rng = np.random.default_rng(seed + 7)
+        shape = (self.camera.height, self.camera.width, 3)
+        self._noise = [np.rint(bank_rng.standard_normal(shape, dtype=np.float32)
+                               * self.settings.noise_sigma).astype(np.int16)
+                       for _ in range(4)] if self.settings.noise_sigma > 0 else []
 
-    def update_char(self, char):
-        """Darken the albedo where the char raster (rows from y_min) changed since last time."""
-        changed = char != self._char_seen
-        if not changed.any():
+    def update_char(self, char, box=None):
+        """
+        Darken the albedo where the char raster (rows from y_min) changed.
+
+        `box` (r0, r1, c0, c1) limits the look to where the panel reported changes (None:
+        nothing changed).
+        """
+        if box is None:
             return
-        rows, cols = np.nonzero(changed.any(axis=1))[0], np.nonzero(changed.any(axis=0))[0]
-        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+        r0, r1, c0, c1 = box
         height = self._wood.shape[0]
         chi = np.flipud(char[r0:r1, c0:c1]).astype(np.float32)[:, :, None]
         top = slice(height - r1, height - r0)
         self._albedo.image[top, c0:c1] = (self._wood[top, c0:c1] * (1.0 - chi)
                                           + self._char_rgb * chi)
-        self._char_seen[r0:r1, c0:c1] = char[r0:r1, c0:c1]
 
     def render(self, T_world_camera, light=None, level=1.0, rng=None):
         """
@@ -141,22 +149,28 @@ class RgbCamera:
         the focused spot, relative to the uniform light.
         """
         s = self.settings
-        image = self._albedo.image
+        image_array = self._albedo.image
         saved = None
         if light is not None:
             rows, cols, relative = light
-            height = image.shape[0]
+            height = image_array.shape[0]
             top = slice(height - rows.stop, height - rows.start)
-            saved = image[top, cols].copy()
-            image[top, cols] *= np.flipud(relative)[:, :, None]
+            saved = image_array[top, cols].copy()
+            image_array[top, cols] *= np.flipud(relative)[:, :, None]
         try:
-            return self._renderer.render(T_world_camera, self._albedo, background=20.0,
-                                         gain=s.sunlit_level * level,
-                                         blur_sigma=s.blur_sigma, noise_sigma=s.noise_sigma,
-                                         rng=rng)
+            image = self._renderer.render(T_world_camera, self._albedo, background=20.0,
+                                          gain=s.sunlit_level * level,
+                                          blur_sigma=s.blur_sigma, noise_sigma=0.0)
         finally:
             if saved is not None:
-                image[top, cols] = saved
+                image_array[top, cols] = saved
+        if self._noise:
+            rng = np.random.default_rng() if rng is None else rng
+            noise = self._noise[int(rng.integers(len(self._noise)))]
+            shift = (int(rng.integers(noise.shape[0])), int(rng.integers(noise.shape[1])))
+            noisy = image.astype(np.int16) + np.roll(noise, shift, axis=(0, 1))
+            image = np.clip(noisy, 0, 255).astype(np.uint8)
+        return image
 
 
 def light_window(field, shape, origin, pixel_size, diffuse_fraction, window):

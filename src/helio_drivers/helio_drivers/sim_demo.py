@@ -5,10 +5,11 @@ Interim demo: paint a handful of dots in the simulated world through the real dr
 Dobot and Maestro on pseudo-terminals, connects ``DobotClient`` and ``MaestroClient`` (the
 drivers' serial libraries) to those ports and runs Algorithm 1 of the paper on a few dots:
 move the lens so the focus lands on the dot at d_lp = 8.2 cm (Eqs 14-15 and the rig's inverse
-kinematics), hold it while N_p (thermal pixels at the 180.9 degC read-out cap, from the
-simulated 16UC1 thermal image) is below 30, retreat by 3 cm and wait until N_p is back to 0,
-then the next dot. At the end it writes ``canvas.png`` and ``dots.csv`` (the charred dots'
-ground truth) into DIR and prints the placement error of every dot.
+kinematics), hold it while N_p (thermal pixels at the 180.9 degC read-out cap, computed by
+``helio_perception.thermal`` from the simulated 16UC1 thermal image) is below 30, retreat
+by 3 cm and wait until N_p is back to 0, then the next dot. At the end it writes
+``canvas.png`` and ``dots.csv`` (the charred dots' ground truth) into DIR and prints the
+placement error of every dot.
 
 SHORTCUT (clearly not the product): the demo aims with the simulated world's TRUE sun
 direction. In the real graph the sun comes from ``sun_estimator`` (Eqs 11-12) and the lens
@@ -30,11 +31,11 @@ import time
 from helio_drivers.dobot_client import DobotClient
 from helio_drivers.dobot_protocol import PtpMode
 from helio_drivers.maestro_client import MaestroClient
-from helio_drivers.sim_cameras import centikelvin_to_celsius
 from helio_drivers.sim_devices import DeviceSettings, SimDevices
 from helio_drivers.sim_world import SimSettings, SimWorld
 from helio_optics.geometry import transform_points
 from helio_optics.rig_kinematics import load_rig_parameters, RigParameters
+from helio_perception.thermal import ThermalAnalyzer, ThermalConfig
 import numpy as np
 
 DEFAULT_DOTS = ((0.060, 0.060), (0.064, 0.060), (0.068, 0.060), (0.060, 0.064),
@@ -72,6 +73,8 @@ class Demo:
         self.servo.connect()
         self.log(f'emulated Dobot on {self.devices.ports[0]}, Maestro on {self.devices.ports[1]}')
         self._next_frame = 0.0
+        cap = self.world.settings.thermal.cap   # T_p taken as the camera cap (Sec. IV-B)
+        self.thermal = ThermalAnalyzer(ThermalConfig(threshold=cap, camera_cap=cap))
 
     def close(self):
         """Disconnect the clients and close the emulators."""
@@ -109,9 +112,8 @@ class Demo:
         while self.world.time + 1e-9 < self._next_frame:
             self.world.step()
         self._next_frame = self.world.time + 1.0 / rate
-        temperatures = centikelvin_to_celsius(self.world.thermal_image())
-        cap = self.world.settings.thermal.cap
-        return int(np.count_nonzero(temperatures >= cap - 0.005)), float(temperatures.max())
+        stats = self.thermal.statistics(self.world.thermal_image(), '16UC1')  # thermal_monitor
+        return stats.n_p, stats.t_max
 
     # ------------------------------------------------------------------ Algorithm 1
     def paint(self, dots, d_lp=0.082, retreat=0.03, np_threshold=30, hold_timeout=90.0):

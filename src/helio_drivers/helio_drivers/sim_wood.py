@@ -98,7 +98,7 @@ class GridParameters:
     half_width: float = 0.035           # half side of the whole patch
     lateral_growth: float = 1.25        # ratio of neighbouring coarse cells
     top_layer: float = 5.0e-5           # thickness of the surface layer
-    depth_growth: float = 1.35          # ratio of neighbouring layers
+    depth_growth: float = 1.5           # ratio of neighbouring layers
     recentre_margin: float = 2.0e-3     # re-centre when the spot is this close to the fine edge
 
     def __post_init__(self):
@@ -267,6 +267,7 @@ class WoodPanel:
         self.ledger = EnergyLedger()
         self.recentres = 0
         self.coarse_overheat = False   # set if T_p was exceeded outside the fine region
+        self._char_dirty = None        # raster box (r0, r1, c0, c1) where char changed
         self._centre = np.zeros(2)
         self._place(self._snap(centre))
         self._last_irradiance = np.zeros((n_lateral, n_lateral))
@@ -564,9 +565,19 @@ class WoodPanel:
         rate = np.where(hot, w.char_preexponential
                         * np.exp(-w.char_activation_energy / (GAS_CONSTANT * t_kelvin)), 0.0)
         chi = self.char[self._raster_fine]
+        rows, cols = self._raster_fine
+        box = (rows.start, rows.stop, cols.start, cols.stop)
+        d = self._char_dirty
+        self._char_dirty = box if d is None else (min(d[0], box[0]), max(d[1], box[1]),
+                                                  min(d[2], box[2]), max(d[3], box[3]))
         chi[:] = 1.0 - (1.0 - chi) * np.exp(-rate * dt)
         self._absorptance[fine] = (w.absorptance_wood
                                    + (w.absorptance_char - w.absorptance_wood) * chi)
+
+    def take_char_changes(self):
+        """Return the raster box (r0, r1, c0, c1) where char changed since the last call."""
+        box, self._char_dirty = self._char_dirty, None
+        return box
 
     def charred_mask(self):
         """Boolean raster of pixels whose char fraction passed `charred_fraction`."""

@@ -47,7 +47,7 @@ class SimSettings:
     cloud_mean_clear_s: float = 300.0
     cloud_mean_cloudy_s: float = 30.0
     cloud_attenuation_range: tuple = (0.2, 0.7)
-    step_s: float = 0.05                 # simulated time per step [s]
+    step_s: float = 0.1                  # simulated time per step [s]
     seed: int = 0                        # camera noise
     lens: LensParameters = field(default_factory=lambda: LensParameters(
         focal_length=0.081, aperture_diameter=0.038, transmission=0.92))   # tuned
@@ -169,6 +169,8 @@ class SimWorld:
         self._unit_irradiance = None
         self._light_key = None
         self._light = None
+        self._pose_key = None
+        self._pose = None
         self.steps = 0
         self._refresh()
 
@@ -190,7 +192,12 @@ class SimWorld:
 
     def pose(self):
         """Return the RigPose (robot-frame transforms) at the present joints."""
-        return self.rig.forward(self.joint_positions())
+        x = self.joint_positions()
+        key = x.tobytes()
+        if key != self._pose_key:  # the arm is still most of the time
+            self._pose = self.rig.forward(x)
+            self._pose_key = key
+        return self._pose
 
     def camera_poses(self):
         """Return (T_world_rgb, T_world_thermal) at the present joints."""
@@ -224,7 +231,7 @@ class SimWorld:
         self._field = self.flux.field(T_world_lens, self._sun_ray)
         centroid = self._field.centroid()
         self.panel.follow(centroid)
-        key = (id(self._field), tuple(self.panel.centre))
+        key = (self.flux.traces, tuple(self.panel.centre))
         if key != self._irradiance_key:
             self._unit_irradiance = irradiance_on_cells(self._field, self.panel.x_edges,
                                                         self.panel.y_edges, 1.0)
@@ -262,14 +269,13 @@ class SimWorld:
         """Return the RGB image (H, W, 3) uint8 at the camera's present pose."""
         T_world_rgb, _ = self.camera_poses()
         field = self._field
-        window = self._light_window(field)
-        key = (id(field), window)
-        if key != self._light_key:
+        if self.flux.traces != self._light_key:  # the lit window changes only with a new trace
+            window = self._light_window(field)
             self._light = None if window is None else light_window(
                 field, self.panel.raster_shape, self.panel.raster_origin,
                 self.panel.grid.fine_cell, self.settings.rgb.diffuse_fraction, window)
-            self._light_key = key
-        self.rgb.update_char(self.panel.char)
+            self._light_key = self.flux.traces
+        self.rgb.update_char(self.panel.char, self.panel.take_char_changes())
         level = self._dni / max(self.sun.dni, 1e-9)
         return self.rgb.render(T_world_rgb, self._light, level, self._rng)
 

@@ -87,7 +87,7 @@ def test_char_darkens_the_rendered_wood_and_the_light_window_brightens_it():
     bare = camera.render(pose)[centre[1], centre[0]].astype(float)
     char = np.zeros((500, 500))
     char[340:360, 340:360] = 1.0   # raster rows from y_min: (0.03, 0.03) is pixel (350, 350)
-    camera.update_char(char)
+    camera.update_char(char, (340, 360, 340, 360))
     charred = camera.render(pose)[centre[1], centre[0]].astype(float)
     assert np.all(charred < 0.3 * bare)
     relative = np.full((20, 20), 10.0, np.float32)
