@@ -62,7 +62,7 @@ class DobotEmulator(PtyDevice):
     def __init__(self, port_path=None, clock=time.monotonic, arm=None,
                  home_joints_deg=(0.0, 10.0, 10.0, 0.0), initial_joints_deg=None,
                  hardware_limits=DobotHardwareLimits(), joint_params=None,
-                 coordinate_params=None, common_params=None, seed=0):
+                 coordinate_params=None, common_params=None, seed=0, line_baudrate=None):
         """Start the device idle at `initial_joints_deg` (home if None), queue started."""
         self.clock = clock
         self.arm = arm or DobotArm()
@@ -82,13 +82,15 @@ class DobotEmulator(PtyDevice):
         self._executed_index = 0
         self._alarms = set()
         self.last_refusal = ''
+        self.motion_durations = {}     # queue index -> planned motion time [s] (benchmarks)
         self.frames_received = 0
         self.checksum_errors_seen = 0
         self._reader = proto.FrameReader()
         limits = self.arm.parameters.limits()
         self._limits_deg = [(math.degrees(limit.lower), math.degrees(limit.upper))
                             for limit in limits] + [J4_LIMITS_DEG]
-        super().__init__(port_path=port_path, seed=seed, name='dobot')
+        super().__init__(port_path=port_path, seed=seed, name='dobot',
+                         line_baudrate=line_baudrate)
 
     # ---- in-process accessors (for the simulated world and tests) ---------------------------
 
@@ -272,6 +274,7 @@ class DobotEmulator(PtyDevice):
                 self._free_at = start
             else:
                 self._current = motion
+                self.motion_durations[index] = motion.end - motion.start
         return now
 
     def _ratios(self):

@@ -46,7 +46,7 @@ class MaestroEmulator(PtyDevice):
 
     def __init__(self, port_path=None, clock=time.monotonic, channel_count=6,
                  calibrations=(), initial_pulse_us=1500.0, min_pulse_us=500.0,
-                 max_pulse_us=2500.0, seed=0):
+                 max_pulse_us=2500.0, seed=0, line_baudrate=None):
         """Create `channel_count` channels at `initial_pulse_us`, limits in microseconds."""
         self.clock = clock
         self.calibrations = {c.name: c for c in calibrations}
@@ -58,7 +58,8 @@ class MaestroEmulator(PtyDevice):
         self._errors = 0
         self._parser = proto.CommandParser()
         self.commands_received = 0
-        super().__init__(port_path=port_path, seed=seed, name='maestro')
+        super().__init__(port_path=port_path, seed=seed, name='maestro',
+                         line_baudrate=line_baudrate)
 
     # ---- in-process accessors ---------------------------------------------------------------
 

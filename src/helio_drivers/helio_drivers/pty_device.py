@@ -18,6 +18,7 @@ import random
 import select
 import tempfile
 import threading
+import time
 import tty
 
 
@@ -37,9 +38,15 @@ class LinkFaults:
 class PtyDevice:
     """Base of the emulators: pty + symlink + reader thread + fault injection."""
 
-    def __init__(self, port_path=None, seed=0, name='device'):
-        """Create the pty now; `port_path` is the symlink (a temporary path if None)."""
+    def __init__(self, port_path=None, seed=0, name='device', line_baudrate=None):
+        """
+        Create the pty now; `port_path` is the symlink (a temporary path if None).
+
+        A pty moves bytes instantly; with `line_baudrate` [bit/s] each reply is held back
+        by its transmission time on a real 8N1 line (10 bits per byte).
+        """
         self.name = name
+        self.line_baudrate = line_baudrate
         self._owned_dir = None
         if port_path is None:
             self._owned_dir = tempfile.mkdtemp(prefix=f'helio_{name}_')
@@ -147,7 +154,10 @@ class PtyDevice:
         while not self._stop.is_set():
             master = self._master
             watch = [self._wake_read] + ([master] if master is not None else [])
-            readable, _, _ = select.select(watch, [], [], 0.5)
+            try:
+                readable, _, _ = select.select(watch, [], [], 0.5)
+            except (OSError, ValueError):
+                continue        # the master was closed by disconnect() meanwhile
             if self._wake_read in readable:
                 os.read(self._wake_read, 1024)
             if master is None or master not in readable:
@@ -183,8 +193,12 @@ class PtyDevice:
             reply = bytearray(self._random.randrange(256) for _ in range(7)) + reply
         if faults.byte_drop_rate > 0.0:
             reply = bytearray(b for b in reply if self._random.random() >= faults.byte_drop_rate)
-        if faults.reply_delay_s > 0.0 and self._stop.wait(faults.reply_delay_s):
+        delay = faults.reply_delay_s
+        if self.line_baudrate:
+            delay += 10.0 * len(reply) / self.line_baudrate
+        if delay > 0.0 and self._stop.wait(delay):
             return
+        deadline = time.monotonic() + 1.0
         with self._io_lock:
             if self._master != master:
                 return          # unplugged while the reply was pending
@@ -193,7 +207,11 @@ class PtyDevice:
                 try:
                     written = os.write(master, view)
                 except BlockingIOError:
-                    select.select([], [master], [], 0.1)
+                    # nobody drains the other side: give up after a second, as bytes
+                    # sent to a closed port are lost
+                    if time.monotonic() > deadline or self._stop.is_set():
+                        return
+                    select.select([], [master], [], 0.05)
                     continue
                 except OSError:
                     return

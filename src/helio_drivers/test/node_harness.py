@@ -76,7 +76,7 @@ class DriverGraph:
 
     def close(self):
         """Shut everything down (the driver leaves its device stopped)."""
-        self.executor.shutdown()
+        self.executor.shutdown(timeout_sec=5.0)
         self.driver.destroy_node()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)

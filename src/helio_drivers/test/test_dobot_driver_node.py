@@ -20,7 +20,7 @@ class Graph(DriverGraph):
             'port': emulator.port_path, 'timeout_s': 0.1, 'retries': 1,
             'joint_state_rate_hz': 50.0, 'status_period_s': 0.2,
             'reconnect_initial_s': 0.05, 'reconnect_max_s': 0.2,
-            'joint_velocity_dps': [200.0] * 4, 'joint_acceleration_dps2': [800.0] * 4})
+            'joint_velocity_dps': [60.0] * 4, 'joint_acceleration_dps2': [400.0] * 4})
 
     def send(self, mode, target, feedback=None):
         return super().send(MoveArm.Goal(mode=mode, target=[float(v) for v in target]),
