@@ -5,6 +5,7 @@
 #   test.sh                         every package
 #   test.sh helio_optics [...]      only these packages
 #   test.sh -- --pytest-args -k x   arguments after -- go to `colcon test`
+# HELIO_TEST_TIMEOUT (s, default 1500) bounds the whole colcon test run.
 # Exit status: 0 only when at least one test ran and none failed or errored.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -29,8 +30,15 @@ trap 'rm -f "$report"' EXIT
         rm -rf "build/$package/test_results" "build/$package/pytest.xml" \
             "build/$package/Testing"
     done
-    colcon test --event-handlers console_cohesion+ summary+ \
-        --packages-select "${packages[@]}" --pytest-args -p no:cacheprovider "$@" || exit 1
+    # A hung test fails the run instead of holding CI until its own limit.
+    timeout --kill-after=30 "${HELIO_TEST_TIMEOUT:-1500}" \
+        colcon test --event-handlers console_cohesion+ summary+ \
+        --packages-select "${packages[@]}" --pytest-args -p no:cacheprovider "$@" || {
+            code=$?
+            [ "$code" -ge 124 ] && echo "error: colcon test stopped after" \
+                "${HELIO_TEST_TIMEOUT:-1500} s (HELIO_TEST_TIMEOUT)" >&2
+            exit 1
+        }
 ) 9>"$root/.helio.lock" || status=$?
 
 for package in "${packages[@]}"; do
