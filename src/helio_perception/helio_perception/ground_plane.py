@@ -414,10 +414,16 @@ class MarkerPoseTracker:
     Reuse the last pose while the joint states are unchanged (within `joint_tolerance`) and
     younger than `max_pose_age`; otherwise re-detect in a region of interest around the last
     corners, then in the whole frame. Without joint states the ROI is searched every frame.
+
+    An image can be older than the joint states that arrive with it (the camera and the
+    drivers are not synchronised), so a pose only becomes reusable when it was detected
+    with the joints already still since the previous frame: the first frame after a move
+    is detected again.
     """
 
     detector: MarkerDetector
     last: MarkerPose = None
+    previous_joints: np.ndarray = None
     counts: dict = field(default_factory=lambda: {'cache': 0, 'roi': 0, 'full': 0,
                                                   'failed': 0})
 
@@ -425,9 +431,9 @@ class MarkerPoseTracker:
         """Return a MarkerResult for this image; `joints` the current joint positions."""
         config = self.detector.config
         joints = None if joints is None else np.asarray(joints, dtype=float)
-        if self.last is not None and joints is not None and self.last.joints is not None \
-                and joints.shape == self.last.joints.shape \
-                and np.max(np.abs(joints - self.last.joints)) <= config.joint_tolerance \
+        still = self._same(joints, self.previous_joints)
+        self.previous_joints = joints
+        if self.last is not None and self._same(joints, self.last.joints) \
                 and (config.max_pose_age <= 0 or stamp - self.last.stamp <= config.max_pose_age):
             self.counts['cache'] += 1
             return MarkerResult(pose=self.last, searched='cache')
@@ -450,13 +456,19 @@ class MarkerPoseTracker:
                                      '(last seen at the image border)')
             return result
         self.counts[result.searched] += 1
-        result.pose.joints = joints
+        result.pose.joints = joints if still else None  # None: not reusable
         self.last = result.pose
         return result
+
+    def _same(self, a, b):
+        """Tell whether two joint vectors are known and equal within the tolerance."""
+        return a is not None and b is not None and a.shape == b.shape and \
+            float(np.max(np.abs(a - b))) <= self.detector.config.joint_tolerance
 
     def forget(self):
         """Drop the cached pose (e.g. when the camera intrinsics change)."""
         self.last = None
+        self.previous_joints = None
 
     def _roi(self, shape):
         corners = self.last.corners

@@ -106,8 +106,10 @@ def test_pose_cache_reuses_while_joints_are_still_and_redetects_when_they_move(s
     tracker = MarkerPoseTracker(MarkerDetector(MarkerConfig(side=scene.marker_side)))
     joints = np.array([0.1, 0.5, 0.3, 0.0, 0.2])
     assert tracker.update(first, scene.camera, 0.0, joints).searched == 'full'
+    # the joints were not known still before that image: detected once more, then reused
+    assert tracker.update(first, scene.camera, 0.1, joints).searched == 'roi'
     cached = tracker.update(first, scene.camera, 0.5, joints + 1e-6)
-    assert cached.searched == 'cache' and cached.pose.stamp == 0.0
+    assert cached.searched == 'cache' and cached.pose.stamp == 0.1
     # the camera moves a little (joints change): the ROI around the last corners finds it
     moved_pose = first_pose.copy()
     moved_pose[:3, 3] += [0.004, -0.003, 0.002]
@@ -117,11 +119,44 @@ def test_pose_cache_reuses_while_joints_are_still_and_redetects_when_they_move(s
     assert np.linalg.norm(result.pose.T_world_camera[:3, 3] - moved_pose[:3, 3]) < 5e-4
     # without joint states the marker is searched (in the ROI) every frame
     assert tracker.update(moved, scene.camera, 1.1, None).searched == 'roi'
+    assert tracker.update(moved, scene.camera, 1.2, None).searched == 'roi'
     # the marker gone: the failure is reported, and the stale pose is not used
     plain = to_gray(scene.render(moved_pose, with_marker=False, rng=rng).image)
-    lost = tracker.update(plain, scene.camera, 1.2, joints + 0.02)
+    lost = tracker.update(plain, scene.camera, 1.3, joints + 0.02)
     assert lost.pose is None and 'not found' in lost.reason
-    assert tracker.counts == {'cache': 1, 'roi': 2, 'full': 1, 'failed': 1}
+    assert tracker.counts == {'cache': 1, 'roi': 4, 'full': 1, 'failed': 1}
+
+
+def test_an_image_older_than_the_joint_states_is_not_cached(scene):
+    """The joints jump before the image of the new pose arrives: no stale pose is kept."""
+    rng = np.random.default_rng(12)
+    old_pose, _ = scene.random_view(rng)
+    new_pose = old_pose.copy()
+    new_pose[:3, 3] += [0.006, 0.004, -0.003]
+    old = to_gray(scene.render(old_pose, rng=rng).image)
+    new = to_gray(scene.render(new_pose, rng=rng).image)
+    tracker = MarkerPoseTracker(MarkerDetector(MarkerConfig(side=scene.marker_side)))
+    before, after = np.zeros(5), np.full(5, 0.05)
+    tracker.update(old, scene.camera, 0.0, before)
+    tracker.update(old, scene.camera, 0.1, before)
+    late = tracker.update(old, scene.camera, 0.2, after)  # old image, new joints
+    assert late.searched == 'roi'
+    result = tracker.update(new, scene.camera, 0.3, after)
+    assert result.searched != 'cache'
+    assert np.linalg.norm(result.pose.T_world_camera[:3, 3] - new_pose[:3, 3]) < 5e-4
+    assert tracker.update(new, scene.camera, 0.4, after).searched == 'cache'
+
+
+def test_pose_cache_expires_after_max_pose_age(scene):
+    rng = np.random.default_rng(6)
+    pose, _ = scene.random_view(rng)
+    gray = to_gray(scene.render(pose, rng=rng).image)
+    tracker = MarkerPoseTracker(MarkerDetector(MarkerConfig(max_pose_age=1.0)))
+    joints = np.zeros(5)
+    tracker.update(gray, scene.camera, 0.0, joints)
+    tracker.update(gray, scene.camera, 0.0, joints)
+    assert tracker.update(gray, scene.camera, 0.9, joints).searched == 'cache'
+    assert tracker.update(gray, scene.camera, 1.1, joints).searched == 'roi'
 
 
 def test_a_marker_leaving_the_image_is_reported_partly_visible(scene):
@@ -142,17 +177,6 @@ def test_a_marker_leaving_the_image_is_reported_partly_visible(scene):
     cut = looking_down_with_marker_at(camera.width - 0.1 * side_pixels)
     result = tracker.update(cut, camera, 0.1, np.full(5, 0.01))
     assert result.pose is None and 'partly visible' in result.reason, result.reason
-
-
-def test_pose_cache_expires_after_max_pose_age(scene):
-    rng = np.random.default_rng(6)
-    pose, _ = scene.random_view(rng)
-    gray = to_gray(scene.render(pose, rng=rng).image)
-    tracker = MarkerPoseTracker(MarkerDetector(MarkerConfig(max_pose_age=1.0)))
-    joints = np.zeros(5)
-    tracker.update(gray, scene.camera, 0.0, joints)
-    assert tracker.update(gray, scene.camera, 0.9, joints).searched == 'cache'
-    assert tracker.update(gray, scene.camera, 1.1, joints).searched == 'roi'
 
 
 def test_world_frame_is_the_marker_frame(scene):
