@@ -195,3 +195,22 @@ def test_maestro_client_retries_and_times_out(maestro):
     emulator.disconnect()
     with pytest.raises(LinkError):
         client.get_position(0)
+
+
+def test_delayed_replies_within_the_timeout_are_waited_for_and_late_ones_retried(dobot):
+    emulator, client = dobot
+    retried = client.retried
+    emulator.inject(reply_delay_s=0.05)          # timeout is 0.1 s
+    assert client.get_pose() is not None
+    assert client.retried == retried
+    # later than the timeout: the request is sent again, and the late reply (same id and
+    # ctrl, arriving during the second attempt) answers it
+    emulator.inject(reply_delay_s=0.15)
+    assert client.executed_index() == 0
+    assert client.retried == retried + 1
+    # later than every attempt: a timeout (another command, so the pending late reply to
+    # the retried request above cannot answer it)
+    emulator.inject(reply_delay_s=0.5)
+    with pytest.raises(DeviceTimeoutError, match='ALARMS'):
+        client.get_alarms()
+    emulator.clear_faults()
