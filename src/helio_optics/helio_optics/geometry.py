@@ -193,7 +193,8 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)):
     """
     eye, target = np.asarray(eye, dtype=float), np.asarray(target, dtype=float)
     z_axis = unit(target - eye)
-    x_axis = np.cross(z_axis, -np.asarray(up, dtype=float))
+    # Right-handed optical frame with y = -up (projected): x = y cross z = z cross up.
+    x_axis = np.cross(z_axis, np.asarray(up, dtype=float))
     if np.linalg.norm(x_axis) < 1e-9:
         x_axis = np.cross(z_axis, [0.0, 1.0, 0.0])
     x_axis = unit(x_axis)

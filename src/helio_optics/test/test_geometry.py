@@ -84,3 +84,18 @@ def test_look_at_points_the_optical_axis_at_the_target():
     np.testing.assert_allclose(camera_in_world, geometry.unit([-0.05, 0.1, -0.3]), atol=1e-12)
     np.testing.assert_allclose(pose[:3, :3].T @ pose[:3, :3], np.eye(3), atol=1e-12)
     assert np.linalg.det(pose[:3, :3]) == pytest.approx(1.0)
+
+
+def test_look_at_keeps_the_image_upright():
+    # Looking horizontally along +x with z up: the image's down axis (+y) is world -z and
+    # its right axis (+x) is world -y, as for a person facing +x.
+    pose = geometry.look_at([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], up=(0.0, 0.0, 1.0))
+    np.testing.assert_allclose(pose[:3, 1], [0.0, 0.0, -1.0], atol=1e-12)
+    np.testing.assert_allclose(pose[:3, 0], [0.0, -1.0, 0.0], atol=1e-12)
+    # Tilted down at a point on the ground: image down still has a negative z component,
+    # and a point above the target projects above the image centre (smaller row).
+    pose = geometry.look_at([0.0, -0.2, 0.3], [0.0, 0.0, 0.0])
+    assert pose[2, 1] < 0.0
+    camera = geometry.PinholeCamera.from_fov(640, 480, math.radians(60))
+    above = geometry.transform_points(geometry.invert_transform(pose), [0.0, 0.0, 0.02])
+    assert camera.project(above)[0, 1] < camera.matrix[1, 2]
