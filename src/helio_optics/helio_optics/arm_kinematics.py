@@ -110,11 +110,16 @@ class DobotArm:
 
     def check_limits(self, joints):
         """Raise UnreachableError for the first joint outside its limits."""
-        for limit, value in zip(self.parameters.limits(), joints):
-            excess = limit.excess(value)
-            if excess > 0.0:
-                raise UnreachableError(
-                    f'{limit.name} would be {math.degrees(value):.2f} deg, '
-                    f'{math.degrees(excess):.2f} deg outside '
-                    f'[{math.degrees(limit.lower):.1f}, {math.degrees(limit.upper):.1f}] deg',
-                    joint=limit.name, excess=excess)
+        check_joint_limits(self.parameters.limits(), joints)
+
+
+def check_joint_limits(limits, joints):
+    """Raise UnreachableError naming the first joint outside its JointLimit, and by how much."""
+    for limit, value in zip(limits, joints):
+        excess = limit.excess(value)
+        if excess > 0.0:
+            raise UnreachableError(
+                f'{limit.name} would be {math.degrees(value):.2f} deg, '
+                f'{math.degrees(excess):.2f} deg outside '
+                f'[{math.degrees(limit.lower):.1f}, {math.degrees(limit.upper):.1f}] deg',
+                joint=limit.name, excess=excess)

@@ -38,7 +38,8 @@ gives the same flat dict (for declaring ROS parameters).
 from dataclasses import dataclass, field, fields, replace
 import math
 
-from helio_optics.arm_kinematics import DobotArm, DobotArmParameters, JointLimit
+from helio_optics.arm_kinematics import check_joint_limits, DobotArm, DobotArmParameters
+from helio_optics.arm_kinematics import JointLimit
 from helio_optics.arm_kinematics import UnreachableError
 from helio_optics.geometry import homogeneous, look_at, rotation_y, rotation_z, unit
 import numpy as np
@@ -241,14 +242,7 @@ class Rig:
 
     def check_limits(self, x):
         """Raise UnreachableError for the first joint of x outside its limits."""
-        for limit, value in zip(self.parameters.limits(), x):
-            excess = limit.excess(value)
-            if excess > 0.0:
-                raise UnreachableError(
-                    f'{limit.name} would be {math.degrees(value):.2f} deg, '
-                    f'{math.degrees(excess):.2f} deg outside '
-                    f'[{math.degrees(limit.lower):.1f}, {math.degrees(limit.upper):.1f}] deg',
-                    joint=limit.name, excess=excess)
+        check_joint_limits(self.parameters.limits(), x)
 
     def yaw_pitch_for_axis(self, axis, preferred_yaw=None):
         """
