@@ -129,7 +129,11 @@ class Demo:
                 n_p, t_max = self.next_thermal_np()
             heated = self.world.time - start
             self.move(self.joints_for(dot, d_lp + retreat))
+            retreated = self.world.time
             while n_p > 0:                                # lines 10-13: retreat until N_p = 0
+                if self.world.time - retreated > hold_timeout:
+                    raise RuntimeError(f'dot {number}: N_p still {n_p} {hold_timeout} s after '
+                                       'the retreat')
                 n_p, t_max = self.next_thermal_np()
             records.append({'target': dot, 'heated_s': heated,
                             'cooled_s': self.world.time - start - heated})

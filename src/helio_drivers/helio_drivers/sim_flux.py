@@ -80,7 +80,7 @@ class LensFlux:
     """Traces the world's (true) lens and makes irradiance maps on the wood patch."""
 
     def __init__(self, lens=None, rays=30000, seed=0, bands=DEFAULT_BANDS,
-                 move_tolerance=2e-5, angle_tolerance=2e-4, beam_spread=0.0):
+                 move_tolerance=2e-5, angle_tolerance=5e-4, beam_spread=0.0):
         """
         Trace `rays` samples of `lens` (LensParameters, design index) in spectral `bands`.
 

@@ -51,7 +51,7 @@ class SimSettings:
     seed: int = 0                        # camera noise
     lens: LensParameters = field(default_factory=lambda: LensParameters(
         focal_length=0.081, aperture_diameter=0.038, transmission=0.92))   # tuned
-    flux_rays: int = 30000
+    flux_rays: int = 20000
     beam_spread: float = 0.004           # lens optical errors, Gaussian sigma [rad] (tuned)
     wood: WoodParameters = field(default_factory=WoodParameters)
     grid: GridParameters = field(default_factory=GridParameters)
