@@ -167,6 +167,8 @@ class GroundRenderer:
         rays = camera.pixel_rays(np.stack([grid_u.ravel(), grid_v.ravel()], axis=-1))
         self._rays = rays.astype(np.float64)
         self._shape = (camera.height * s, camera.width * s)
+        self._cached_key = None     # pose and texture geometry of the cached maps
+        self._cached_maps = None    # (x, y, column, row) for that key
 
     def ground_points(self, T_world_camera):
         """Return world (x, y) grids [m] where each sub-pixel ray meets z = 0 (NaN if never)."""
@@ -179,6 +181,25 @@ class GroundRenderer:
         y = (origin[1] + scale * directions[:, 1]).reshape(self._shape)
         return x, y
 
+    def _maps(self, T_world_camera, texture):
+        """
+        Return ground (x, y) and texture (column, row) remap grids for a pose and a texture.
+
+        The camera rarely moves between frames (the arm holds the lens while the wood heats),
+        so the last grids are kept and reused while the pose and the texture's geometry are
+        unchanged.
+        """
+        pose = np.asarray(T_world_camera, dtype=np.float64)
+        key = (pose.tobytes(), tuple(texture.extent), texture.image.shape[:2])
+        if key != self._cached_key:
+            x, y = self.ground_points(pose)
+            column, row = texture.texture_coordinates(x, y)
+            column = np.nan_to_num(column, nan=-1e6).astype(np.float32)
+            row = np.nan_to_num(row, nan=-1e6).astype(np.float32)
+            self._cached_maps = (x, y, column, row)
+            self._cached_key = key
+        return self._cached_maps
+
     def render(self, T_world_camera, texture, spots=(), background=40.0, gain=1.0,
                blur_sigma=0.0, noise_sigma=0.0, rng=None, dtype=np.uint8):
         """
@@ -189,11 +210,8 @@ class GroundRenderer:
         255 clip: saturation), `blur_sigma` [px] Gaussian optical blur, `noise_sigma` [levels]
         Gaussian sensor noise from `rng` (a numpy Generator). Channels follow the texture.
         """
-        x, y = self.ground_points(T_world_camera)
-        column, row = texture.texture_coordinates(x, y)
-        column = np.nan_to_num(column, nan=-1e6).astype(np.float32)
-        row = np.nan_to_num(row, nan=-1e6).astype(np.float32)
-        source = texture.image.astype(np.float32)
+        x, y, column, row = self._maps(T_world_camera, texture)
+        source = np.asarray(texture.image, dtype=np.float32)
         channels = 1 if source.ndim == 2 else source.shape[2]
         border = (float(background),) * max(channels, 1)
         image = cv2.remap(source, column, row, cv2.INTER_LINEAR,

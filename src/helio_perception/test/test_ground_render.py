@@ -95,3 +95,22 @@ def test_marker_placement_errors_are_clear():
         make_panel_texture(extent=(-0.01, 0.1, -0.01, 0.1))
     with pytest.raises(ValueError, match='unknown ArUco dictionary'):
         aruco_dictionary('DICT_NOPE')
+
+
+def test_reused_maps_never_go_stale():
+    # One renderer across pose and texture changes must give what a fresh renderer gives.
+    texture = make_panel_texture(extent=(-0.05, 0.15, -0.05, 0.15), metres_per_pixel=5e-4)
+    shifted = GroundTexture(image=texture.image, extent=(-0.04, 0.16, -0.05, 0.15))
+    poses = [look_at([0.05, -0.1, 0.2], [0.05, 0.05, 0.0]),
+             look_at([0.06, -0.1, 0.2], [0.05, 0.05, 0.0])]
+    reused = GroundRenderer(CAMERA)
+    for pose, ground in [(poses[0], texture), (poses[1], texture), (poses[1], shifted),
+                         (poses[0], texture)]:
+        expected = GroundRenderer(CAMERA).render(pose, ground)
+        np.testing.assert_array_equal(reused.render(pose, ground), expected)
+    # A pose changed in place (same array object) is seen as a new pose.
+    pose = poses[0].copy()
+    reused.render(pose, texture)
+    pose[0, 3] += 0.01
+    np.testing.assert_array_equal(reused.render(pose, texture),
+                                  GroundRenderer(CAMERA).render(pose, texture))
