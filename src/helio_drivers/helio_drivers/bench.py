@@ -7,7 +7,10 @@ Figures: command round-trip latency (GetPose on the Dobot emulator, Get Position
 Maestro emulator) median and p99; the pose polling rate one client achieves; and for arm
 moves, the time from sending a MoveArm goal to receiving its result against the motion time
 the emulator planned (their difference is the driver's completion overhead), plus the same
-at the library level (queue a move, wait for its executed index).
+at the library level (queue a move, wait for its executed index). The simulated world's
+figures (heat-solver and flux-map cost per step, real-time factor of the world and of the
+sim_world node with both cameras publishing) come from helio_drivers.sim_bench and are added
+unless --skip-sim is given.
 """
 
 import argparse
@@ -175,11 +178,17 @@ def main(argv=None):
                         help='duration of each pose polling run [s] (default 2)')
     parser.add_argument('--skip-node', action='store_true',
                         help='skip the MoveArm benchmark (needs the built workspace)')
+    parser.add_argument('--skip-sim', action='store_true',
+                        help='skip the simulated world figures (helio_drivers.sim_bench)')
     args = parser.parse_args(argv)
     figures = bench_round_trips(args.samples, args.poll_seconds)
     figures.update(bench_client_moves(poll_period=0.02))
     if not args.skip_node:
         figures.update(bench_node_moves())
+    if not args.skip_sim:
+        from helio_drivers.sim_bench import bench_sim
+        figures.update({name: float(value)
+                        for name, value in bench_sim(skip_node=args.skip_node).items()})
     width = max(len(name) for name in figures)
     for name, value in figures.items():
         print(f'{name:<{width}}  {value:10.3f}')
