@@ -17,9 +17,40 @@ YAW = proto.ServoCalibration('lens_yaw', 0, min_pulse_us=700.0, max_pulse_us=230
 PITCH = proto.ServoCalibration('lens_pitch', 3)
 
 
+class FreezableClock:
+    """Monotonic seconds that stand still between freeze() and thaw() (the emulator's clock)."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._offset = 0.0
+        self._frozen_at = None
+
+    def __call__(self):
+        with self._lock:
+            if self._frozen_at is not None:
+                return self._frozen_at
+            return time.monotonic() - self._offset
+
+    def freeze(self):
+        with self._lock:
+            if self._frozen_at is None:
+                self._frozen_at = time.monotonic() - self._offset
+
+    def thaw(self):
+        with self._lock:
+            if self._frozen_at is not None:
+                self._offset = time.monotonic() - self._frozen_at
+                self._frozen_at = None
+
+
 @pytest.fixture
-def wrist():
-    emulator = MaestroEmulator(calibrations=[YAW, PITCH])
+def clock():
+    return FreezableClock()
+
+
+@pytest.fixture
+def wrist(clock):
+    emulator = MaestroEmulator(calibrations=[YAW, PITCH], clock=clock)
     parameters = {'port': emulator.port_path, 'timeout_s': 0.1, 'retries': 1,
                   'joint_state_rate_hz': 50.0, 'status_period_s': 0.2,
                   'reconnect_initial_s': 0.05, 'reconnect_max_s': 0.2,
@@ -61,21 +92,27 @@ def test_out_of_range_angle_is_refused_naming_the_joint(wrist):
     assert emulator.pulse_widths_us()[0] == pytest.approx(1500.0)
 
 
-def test_cancel_holds_the_servos_mid_move(wrist):
+def test_cancel_holds_the_servos_mid_move(wrist, clock):
     emulator, graph = wrist
     started = threading.Event()
 
     def on_feedback(message):
         if message.feedback.current_pitch > 0.1:
+            # Stop the emulator's time mid-move, so however late the cancel arrives on a
+            # loaded machine, the servo is still on its way to 1.5 rad when it does.
+            clock.freeze()
             started.set()
     handle = graph.send(MoveWrist.Goal(yaw=0.1, pitch=1.5), feedback=on_feedback)
     assert started.wait(5.0)
+    frozen_pitch = PITCH.angle(emulator.pulse_widths_us()[3])
+    assert 0.1 < frozen_pitch < 1.4
     wait_for(handle.cancel_goal_async())
     response = wait_for(handle.get_result_async())
+    clock.thaw()
     assert response.status == 5      # GoalStatus.STATUS_CANCELED
     # the new target is where the servo was when cancelled: it stops there, not at 1.5 rad
     held = PITCH.angle(emulator.target_pulse_widths_us()[3])
-    assert 0.1 < held < 1.4
+    assert held == pytest.approx(frozen_pitch, abs=1e-3)
     assert response.result.achieved_pitch == pytest.approx(held, abs=0.05)
 
 
