@@ -16,13 +16,12 @@ the protocol (mm, deg).
 """
 
 import math
-import threading
 import time
 
 from helio_drivers import dobot_protocol as proto
 from helio_drivers.dobot_emulator import J4_LIMITS_DEG
 from helio_drivers.serial_link import (
-    DeviceTimeoutError, LinkError, open_serial, PORT_FAILURES)
+    DeviceTimeoutError, LinkError, PORT_FAILURES, SerialClient)
 from helio_optics.arm_kinematics import DobotArm, UnreachableError
 import numpy as np
 import serial
@@ -80,57 +79,25 @@ def check_target(arm, mode, target):
             joint='j4 (end servo)', excess=excess)
 
 
-class DobotClient:
+class DobotClient(SerialClient):
     """A Dobot Magician on a serial port (thread-safe: one request at a time)."""
 
     def __init__(self, port, baudrate=115200, timeout=0.2, retries=2, arm=None):
         """Configure; nothing is opened until connect()."""
-        if timeout <= 0.0:
-            raise ValueError(f'timeout must be positive, got {timeout}')
-        if retries < 0:
-            raise ValueError(f'retries must be >= 0, got {retries}')
-        self.port = port
-        self.baudrate = baudrate
-        self.timeout = timeout
-        self.retries = retries
+        super().__init__(port, baudrate, timeout, retries)
         self.arm = arm or DobotArm()
-        self._serial = None
         self._reader = proto.FrameReader()
-        self._lock = threading.Lock()
-        self.retried = 0            # requests sent again after a bad or missing reply
         self.requests = 0
 
     # ---- link -------------------------------------------------------------------------------
-
-    @property
-    def connected(self):
-        """Whether the port is open (no failure seen since)."""
-        return self._serial is not None
 
     @property
     def checksum_errors(self):
         """Count the replies dropped for a bad checksum since creation."""
         return self._reader.checksum_errors
 
-    def connect(self):
-        """Open the port; LinkError if it cannot be opened."""
-        with self._lock:
-            self._close_locked()
-            self._serial = open_serial(self.port, self.baudrate, self.timeout)
-            self._reader.reset()
-
-    def close(self):
-        """Close the port (idempotent)."""
-        with self._lock:
-            self._close_locked()
-
-    def _close_locked(self):
-        if self._serial is not None:
-            try:
-                self._serial.close()
-            except PORT_FAILURES:
-                pass
-            self._serial = None
+    def _on_open(self):
+        self._reader.reset()
 
     # ---- requests ---------------------------------------------------------------------------
 

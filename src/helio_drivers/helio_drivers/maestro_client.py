@@ -7,55 +7,20 @@ for the expected number of bytes, retrying up to ``retries`` more times before r
 ``DeviceTimeoutError``. A failing port raises ``LinkError`` and closes the port.
 """
 
-import threading
 import time
 
 from helio_drivers import maestro_protocol as proto
 from helio_drivers.serial_link import (
-    DeviceTimeoutError, LinkError, open_serial, PORT_FAILURES)
+    DeviceTimeoutError, LinkError, PORT_FAILURES, SerialClient)
 import serial
 
 
-class MaestroClient:
+class MaestroClient(SerialClient):
     """A Maestro on a serial port (thread-safe: one exchange at a time)."""
 
     def __init__(self, port, baudrate=115200, timeout=0.1, retries=2):
         """Configure; nothing is opened until connect()."""
-        if timeout <= 0.0:
-            raise ValueError(f'timeout must be positive, got {timeout}')
-        if retries < 0:
-            raise ValueError(f'retries must be >= 0, got {retries}')
-        self.port = port
-        self.baudrate = baudrate
-        self.timeout = timeout
-        self.retries = retries
-        self._serial = None
-        self._lock = threading.Lock()
-        self.retried = 0
-
-    @property
-    def connected(self):
-        """Whether the port is open (no failure seen since)."""
-        return self._serial is not None
-
-    def connect(self):
-        """Open the port; LinkError if it cannot be opened."""
-        with self._lock:
-            self._close_locked()
-            self._serial = open_serial(self.port, self.baudrate, self.timeout)
-
-    def close(self):
-        """Close the port (idempotent)."""
-        with self._lock:
-            self._close_locked()
-
-    def _close_locked(self):
-        if self._serial is not None:
-            try:
-                self._serial.close()
-            except PORT_FAILURES:
-                pass
-            self._serial = None
+        super().__init__(port, baudrate, timeout, retries)
 
     def _exchange(self, data, reply_length, what):
         with self._lock:

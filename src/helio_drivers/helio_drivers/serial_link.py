@@ -1,10 +1,11 @@
 """
-What both pyserial clients share: the errors they raise, opening a port, and reconnect backoff.
+What both pyserial clients share: errors, opening a port, the link state, reconnect backoff.
 
 No rclpy here: the nodes use these to keep the link state and to decide when to retry.
 """
 
 import termios
+import threading
 
 import serial
 
@@ -68,3 +69,54 @@ class ReconnectBackoff:
         """Reset after a successful connection."""
         self.attempts = 0
         self.next_attempt_at = 0.0
+
+
+class SerialClient:
+    """
+    The link half of a device client: port settings, connect/close, one exchange at a time.
+
+    Subclasses add the device's requests; they hold `self._lock` around each exchange and
+    override `_on_open()` to reset per-link state (e.g. a frame reader).
+    """
+
+    def __init__(self, port, baudrate, timeout, retries):
+        """Configure; nothing is opened until connect()."""
+        if timeout <= 0.0:
+            raise ValueError(f'timeout must be positive, got {timeout}')
+        if retries < 0:
+            raise ValueError(f'retries must be >= 0, got {retries}')
+        self.port = port
+        self.baudrate = baudrate
+        self.timeout = timeout
+        self.retries = retries
+        self._serial = None
+        self._lock = threading.Lock()
+        self.retried = 0            # requests sent again after a bad or missing reply
+
+    @property
+    def connected(self):
+        """Whether the port is open (no failure seen since)."""
+        return self._serial is not None
+
+    def connect(self):
+        """Open the port; LinkError if it cannot be opened."""
+        with self._lock:
+            self._close_locked()
+            self._serial = open_serial(self.port, self.baudrate, self.timeout)
+            self._on_open()
+
+    def close(self):
+        """Close the port (idempotent)."""
+        with self._lock:
+            self._close_locked()
+
+    def _on_open(self):
+        """Reset per-link state after the port opened (called with the lock held)."""
+
+    def _close_locked(self):
+        if self._serial is not None:
+            try:
+                self._serial.close()
+            except PORT_FAILURES:
+                pass
+            self._serial = None
