@@ -197,6 +197,22 @@ def test_maestro_client_retries_and_times_out(maestro):
         client.get_position(0)
 
 
+def test_a_late_maestro_reply_is_never_taken_for_another_channel(maestro):
+    # Get Position replies carry no channel number. A reply later than the timeout must not
+    # become the answer to the next query (seen: the servo driver's hold read pitch as yaw).
+    emulator, client = maestro
+    client.set_speed(0, 0)
+    client.set_acceleration(0, 0)
+    client.set_target(0, 4 * 1800)      # channel 0 at 1800 us; channel 1 stays at 1500 us
+    assert client.get_position(0) == 4 * 1800
+    emulator.inject(reply_delay_s=0.15)     # every reply 50 % later than the 0.1 s timeout
+    with pytest.raises(DeviceTimeoutError):
+        client.get_position(0)
+    emulator.clear_faults()
+    assert client.get_position(1) == 4 * 1500
+    assert client.get_position(0) == 4 * 1800
+
+
 def test_delayed_replies_within_the_timeout_are_waited_for_and_late_ones_retried(dobot):
     emulator, client = dobot
     retried = client.retried
