@@ -21,11 +21,12 @@ import time
 from helio_drivers import dobot_protocol as proto
 from helio_drivers.dobot_client import (
     check_target, DobotClient, LIMIT_ALARMS, pose_to_si)
-from helio_drivers.node_support import declare, device_status
+from helio_drivers.node_support import device_status
 from helio_drivers.serial_link import DeviceError, LinkError, ReconnectBackoff
 from helio_msgs.action import MoveArm
 from helio_msgs.msg import DeviceStatus
 from helio_optics.arm_kinematics import UnreachableError
+from helio_optics.node_parameters import declare
 import rclpy
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup

@@ -19,10 +19,11 @@ import time
 
 from helio_drivers import maestro_protocol as proto
 from helio_drivers.maestro_client import MaestroClient
-from helio_drivers.node_support import declare, device_status
+from helio_drivers.node_support import device_status
 from helio_drivers.serial_link import DeviceError, LinkError, ReconnectBackoff
 from helio_msgs.action import MoveWrist
 from helio_msgs.msg import DeviceStatus
+from helio_optics.node_parameters import declare
 import rclpy
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup

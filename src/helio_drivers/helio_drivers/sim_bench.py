@@ -29,7 +29,8 @@ import time
 from helio_drivers.sim_calibration import aim
 from helio_drivers.sim_flux import irradiance_on_cells, lens_pose_in_world
 from helio_drivers.sim_world import SimSettings, SimWorld
-from helio_optics.rig_kinematics import load_rig_parameters, RigParameters
+from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
+from helio_optics.rig_kinematics import RigParameters
 import numpy as np
 
 
@@ -43,7 +44,6 @@ def _median_ms(function, repeats):
 
 
 def _rig():
-    from helio_drivers.sim_demo import default_rig_file
     path = default_rig_file()
     return (load_rig_parameters(path) if path else RigParameters()), path
 

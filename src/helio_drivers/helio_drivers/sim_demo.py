@@ -34,26 +34,13 @@ from helio_drivers.maestro_client import MaestroClient
 from helio_drivers.sim_devices import DeviceSettings, SimDevices
 from helio_drivers.sim_world import SimSettings, SimWorld
 from helio_optics.geometry import transform_points
-from helio_optics.rig_kinematics import load_rig_parameters, RigParameters
+from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
+from helio_optics.rig_kinematics import RigParameters
 from helio_perception.thermal import ThermalAnalyzer, ThermalConfig
 import numpy as np
 
 DEFAULT_DOTS = ((0.060, 0.060), (0.064, 0.060), (0.068, 0.060), (0.060, 0.064),
                 (0.060, 0.068), (0.068, 0.068))
-
-
-def default_rig_file():
-    """Return helio_optics' config/rig.yaml (installed share, else the source tree), or None."""
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        path = os.path.join(get_package_share_directory('helio_optics'), 'config', 'rig.yaml')
-        if os.path.exists(path):
-            return path
-    except (ImportError, LookupError, OSError):
-        pass
-    here = os.path.dirname(os.path.abspath(__file__))
-    path = os.path.join(here, '..', '..', 'helio_optics', 'config', 'rig.yaml')
-    return path if os.path.exists(path) else None
 
 
 class Demo:

@@ -17,15 +17,15 @@ At shutdown it writes ``canvas.png`` and ``dots.csv`` into ``output_dir`` (if se
 truth (sun, heading, lens focus) is published nowhere: the controller must find it.
 """
 
-import os
 import threading
 import time
 
-from helio_drivers.node_support import declare
 from helio_drivers.sim_clock import Pacer
 from helio_drivers.sim_devices import DeviceSettings, SimDevices
 from helio_drivers.sim_world import flat_settings, settings_from_flat, SimSettings, SimWorld
-from helio_optics.rig_kinematics import load_rig_parameters, RigParameters
+from helio_optics.node_parameters import declare
+from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
+from helio_optics.rig_kinematics import RigParameters
 from helio_perception.image_conversion import numpy_to_image
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 import rclpy
@@ -184,14 +184,10 @@ class SimWorldNode(Node):
         return declare(self, name, default, description, minimum, maximum)
 
     def _rig_parameters(self, rig_file):
+        rig_file = rig_file or default_rig_file()
         if not rig_file:
-            try:
-                from ament_index_python.packages import get_package_share_directory
-                rig_file = os.path.join(get_package_share_directory('helio_optics'), 'config',
-                                        'rig.yaml')
-            except (ImportError, LookupError, OSError) as error:
-                self.get_logger().warn(f'no helio_optics share ({error}): default rig geometry')
-                return RigParameters()
+            self.get_logger().warn('no helio_optics config/rig.yaml found: default rig geometry')
+            return RigParameters()
         return load_rig_parameters(rig_file)
 
     # ------------------------------------------------------------------ loop

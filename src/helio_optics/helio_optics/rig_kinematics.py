@@ -37,6 +37,7 @@ gives the same flat dict (for declaring ROS parameters).
 
 from dataclasses import dataclass, field, fields, replace
 import math
+import os
 
 from helio_optics.arm_kinematics import check_joint_limits, DobotArm, DobotArmParameters
 from helio_optics.arm_kinematics import JointLimit
@@ -47,7 +48,7 @@ import numpy as np
 JOINT_NAMES = ('dobot_j1', 'dobot_j2', 'dobot_j3', 'lens_yaw', 'lens_pitch')
 
 __all__ = ['JOINT_NAMES', 'LensTarget', 'Rig', 'RigParameters', 'RigPose', 'UnreachableError',
-           'camera_mount', 'load_rig_parameters']
+           'camera_mount', 'default_rig_file', 'load_rig_parameters']
 
 
 def camera_mount(position, focus_depth, up=(1.0, 0.0, 0.0)):
@@ -127,6 +128,23 @@ class RigParameters:
             else:
                 raise ValueError(f'unknown rig parameter {name!r}')
         return replace(cls(), arm=DobotArmParameters(**arm_values), **rig_values)
+
+
+def default_rig_file():
+    """
+    Return helio_optics' config/rig.yaml, or None when it cannot be found.
+
+    The installed package share first (ament index), then the source tree beside this module.
+    """
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        path = os.path.join(get_package_share_directory('helio_optics'), 'config', 'rig.yaml')
+        if os.path.exists(path):
+            return path
+    except (ImportError, LookupError, OSError):
+        pass
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'config', 'rig.yaml')
+    return path if os.path.exists(path) else None
 
 
 def load_rig_parameters(path):

@@ -12,15 +12,13 @@ Parameters: see ``config/sun_estimator.yaml`` (all declared with descriptors).
 import bisect
 import datetime
 import math
-import os
 
-from ament_index_python.packages import get_package_share_directory
 from helio_msgs.msg import SpotObservation, SunEstimate
 from helio_msgs.srv import EstimateSun
 from helio_optics.ephemeris import corrected_angles, Site, sun_position
 from helio_optics.geometry import direction_from_angles, transform_points
 from helio_optics.lens import LensParameters
-from helio_optics.rig_kinematics import JOINT_NAMES, load_rig_parameters, Rig
+from helio_optics.rig_kinematics import default_rig_file, JOINT_NAMES, load_rig_parameters, Rig
 from helio_optics.sun_estimation import METHODS, Observation, SunEstimator
 import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -53,8 +51,9 @@ class SunEstimatorNode(Node):
             focal_length=p('lens.focal_length'), refractive_index=p('lens.refractive_index'),
             thickness=p('lens.thickness'), aperture_diameter=p('lens.aperture_diameter'),
             transmission=p('lens.transmission'), facets=p('lens.facets'))
-        rig_file = p('rig_config') or os.path.join(
-            get_package_share_directory('helio_optics'), 'config', 'rig.yaml')
+        rig_file = p('rig_config') or default_rig_file()
+        if not rig_file:
+            raise FileNotFoundError('no rig_config given and no helio_optics config/rig.yaml')
         self.rig = Rig(load_rig_parameters(rig_file))
         self.estimator = SunEstimator(lens, p('rim_points'), p('contour_fraction'))
         if p('method') not in METHODS:

@@ -4,7 +4,8 @@ import math
 import os
 
 from helio_optics.geometry import direction_from_angles, transform_points
-from helio_optics.rig_kinematics import load_rig_parameters, Rig, RigParameters
+from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters, Rig
+from helio_optics.rig_kinematics import RigParameters
 from helio_optics.rig_kinematics import UnreachableError
 import numpy as np
 import pytest
@@ -110,3 +111,10 @@ def test_paper_canvas_is_reachable_for_sun_elevations_30_to_80_deg():
     # Every canvas point for every elevation 30-80 deg and nearly every sun azimuth; the
     # few misses are far/near corners with a low sun (the README lists them).
     assert reachable / total >= 0.97
+
+
+def test_default_rig_file_is_the_package_config():
+    # Installed share or source tree: either way the same geometry as the source config/.
+    path = default_rig_file()
+    assert path is not None and path.endswith('rig.yaml')
+    assert load_rig_parameters(path) == load_rig_parameters(CONFIG)

@@ -1,29 +1,11 @@
-"""Helpers the perception nodes share: described parameters, joint states, rig, diagnostics."""
+"""Helpers the perception nodes share: joint states, rig, diagnostics."""
 
-import os
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from helio_optics.rig_kinematics import JOINT_NAMES, load_rig_parameters, Rig, RigParameters
+from helio_optics.rig_kinematics import default_rig_file, JOINT_NAMES, load_rig_parameters
+from helio_optics.rig_kinematics import Rig, RigParameters
 import numpy as np
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-
-
-def declare(node, name, default, description, minimum=None, maximum=None, choices=None):
-    """Declare a parameter with a descriptor (and a range for numbers) and return its value."""
-    if choices:
-        description = f'{description} One of: {", ".join(choices)}.'
-    descriptor = ParameterDescriptor(description=description)
-    if minimum is not None and isinstance(default, float):
-        descriptor.floating_point_range = [FloatingPointRange(
-            from_value=float(minimum), to_value=float(maximum), step=0.0)]
-    elif minimum is not None and isinstance(default, int) and not isinstance(default, bool):
-        descriptor.integer_range = [IntegerRange(
-            from_value=int(minimum), to_value=int(maximum), step=1)]
-    value = node.declare_parameter(name, default, descriptor).value
-    if choices and value not in choices:
-        raise ValueError(f'parameter {name} must be one of {choices}, got {value!r}')
-    return value
 
 
 def stamp_seconds(stamp):
@@ -62,14 +44,10 @@ class JointCache:
 
 def load_rig(node, rig_file):
     """Return a Rig from `rig_file` (empty: helio_optics' share/config/rig.yaml)."""
+    rig_file = rig_file or default_rig_file()
     if not rig_file:
-        try:
-            from ament_index_python.packages import get_package_share_directory
-            rig_file = os.path.join(get_package_share_directory('helio_optics'), 'config',
-                                    'rig.yaml')
-        except (ImportError, LookupError, OSError) as error:
-            node.get_logger().warn(f'no helio_optics share ({error}): default rig geometry')
-            return Rig(RigParameters())
+        node.get_logger().warn('no helio_optics config/rig.yaml found: default rig geometry')
+        return Rig(RigParameters())
     return Rig(load_rig_parameters(rig_file))
 
 

@@ -22,11 +22,12 @@ from geometry_msgs.msg import Point
 from helio_msgs.msg import SpotObservation
 from helio_optics.geometry import quaternion_from_matrix
 from helio_optics.lens import LensParameters
+from helio_optics.node_parameters import declare
 from helio_perception.frame_statistics import FrameStatistics
 from helio_perception.ground_plane import camera_from_info, MarkerConfig
 from helio_perception.image_conversion import image_to_numpy, ImageConversionError
 from helio_perception.node_support import (
-    declare, diagnostics, JointCache, load_rig, stamp_seconds)
+    diagnostics, JointCache, load_rig, stamp_seconds)
 from helio_perception.spot_detection import SpotConfig, THRESHOLD_MODES
 from helio_perception.spot_observer import optics_from_world, SpotObserver
 import rclpy

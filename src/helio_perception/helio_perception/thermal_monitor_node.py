@@ -18,11 +18,12 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Point
 from helio_msgs.msg import ThermalStats
 from helio_optics.geometry import invert_transform
+from helio_optics.node_parameters import declare
 from helio_perception.frame_statistics import FrameStatistics
 from helio_perception.ground_plane import camera_from_info, GroundMapping
 from helio_perception.image_conversion import image_to_numpy, ImageConversionError
 from helio_perception.node_support import (
-    declare, diagnostics, JointCache, load_rig, stamp_seconds)
+    diagnostics, JointCache, load_rig, stamp_seconds)
 from helio_perception.thermal import ThermalAnalyzer, ThermalConfig
 import numpy as np
 import rclpy
