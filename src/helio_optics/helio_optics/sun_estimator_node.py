@@ -18,20 +18,16 @@ from helio_msgs.srv import EstimateSun
 from helio_optics.ephemeris import corrected_angles, Site, sun_position
 from helio_optics.geometry import direction_from_angles, transform_points
 from helio_optics.lens import LensParameters
+from helio_optics.node_parameters import declare
 from helio_optics.rig_kinematics import default_rig_file, JOINT_NAMES, load_rig_parameters, Rig
 from helio_optics.sun_estimation import METHODS, Observation, SunEstimator
 import numpy as np
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
-
-
-def _float_range(low, high):
-    return [FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)]
 
 
 def stamp_to_datetime(stamp_ns):
@@ -79,54 +75,48 @@ class SunEstimatorNode(Node):
 
     # -- parameters --------------------------------------------------------------------------
     def _declare_parameters(self):
-        def declare(name, value, description, ranges=None, integer=False):
-            descriptor = ParameterDescriptor(description=description)
-            if ranges is not None and integer:
-                descriptor.integer_range = [IntegerRange(from_value=ranges[0],
-                                                         to_value=ranges[1], step=1)]
-            elif ranges is not None:
-                descriptor.floating_point_range = _float_range(*ranges)
-            self.declare_parameter(name, value, descriptor)
-
-        declare('method', 'levenberg_marquardt',
+        declare(self, 'method', 'levenberg_marquardt',
                 "default solver: 'levenberg_marquardt' (joint, robust) or "
                 "'interaction_matrix' (the paper's Eqs 11-12)")
-        declare('lens.focal_length', 0.080, 'lens focal length f [m]', (0.01, 1.0))
-        declare('lens.refractive_index', 1.4914, 'lens refractive index n [-]', (1.01, 3.0))
-        declare('lens.thickness', 0.002, 'lens plate thickness [m]', (0.0, 0.02))
-        declare('lens.aperture_diameter', 0.058, 'lens clear aperture diameter [m]',
-                (0.001, 1.0))
-        declare('lens.transmission', 0.92, 'lens transmission kappa [-]', (0.01, 1.0))
-        declare('lens.facets', 'corrected', "'corrected' or 'spherical' (paper Eq 3)")
-        declare('rig_config', '', 'rig geometry YAML (empty: helio_optics config/rig.yaml)')
-        declare('rim_points', 64, 'rays traced on the contour ring of the model [-]',
-                (8, 4096), integer=True)
-        declare('contour_fraction', 1.0,
+        declare(self, 'lens.focal_length', 0.080, 'lens focal length f [m]', 0.01, 1.0)
+        declare(self, 'lens.refractive_index', 1.4914, 'lens refractive index n [-]', 1.01, 3.0)
+        declare(self, 'lens.thickness', 0.002, 'lens plate thickness [m]', 0.0, 0.02)
+        declare(self, 'lens.aperture_diameter', 0.058, 'lens clear aperture diameter [m]',
+                0.001, 1.0)
+        declare(self, 'lens.transmission', 0.92, 'lens transmission kappa [-]', 0.01, 1.0)
+        declare(self, 'lens.facets', 'corrected', "'corrected' or 'spherical' (paper Eq 3)")
+        declare(self, 'rig_config', '',
+                'rig geometry YAML (empty: helio_optics config/rig.yaml)')
+        declare(self, 'rim_points', 64, 'rays traced on the contour ring of the model [-]',
+                8, 4096)
+        declare(self, 'contour_fraction', 1.0,
                 'radius of the modelled contour ring over the aperture radius (1: rim) [-]',
-                (0.05, 1.0))
-        declare('centre_sigma', 0.5e-3, 'standard deviation of a spot centre on the ground [m]',
-                (1e-6, 0.05))
-        declare('max_observations', 60, 'spot observations kept for an estimate [-]',
-                (1, 10000), integer=True)
-        declare('max_observation_age', 300.0, 'observations older than this are dropped [s]',
-                (0.1, 1e6))
-        declare('joint_state_tolerance', 0.1,
+                0.05, 1.0)
+        declare(self, 'centre_sigma', 0.5e-3,
+                'standard deviation of a spot centre on the ground [m]', 1e-6, 0.05)
+        declare(self, 'max_observations', 60, 'spot observations kept for an estimate [-]',
+                1, 10000)
+        declare(self, 'max_observation_age', 300.0,
+                'observations older than this are dropped [s]', 0.1, 1e6)
+        declare(self, 'joint_state_tolerance', 0.1,
                 'largest time between a spot image and the joint state used for it [s]',
-                (0.0, 10.0))
-        declare('gain', 0.9, 'interaction-matrix gain lambda (Eq 11) [-]', (0.01, 2.0))
-        declare('delta', 1e-5, 'interaction-matrix step delta (Eq 12) [rad]', (1e-9, 0.1))
-        declare('tolerance', 1e-9, 'interaction-matrix stop on ||y_t - y_img|| [-]',
-                (1e-15, 1.0))
-        declare('max_iterations', 60, 'iteration limit of either solver [-]', (1, 10000),
-                integer=True)
-        declare('site.latitude_deg', 46.5197, 'site latitude, north positive [deg]', (-90, 90))
-        declare('site.longitude_deg', 6.6323, 'site longitude, east positive [deg]',
-                (-180, 360))
-        declare('site.elevation_m', 400.0, 'site height above sea level [m]', (-500, 9000))
-        declare('site.temperature_c', 20.0, 'air temperature for refraction [degC]', (-60, 60))
-        declare('site.pressure_pa', 101325.0, 'air pressure for refraction [Pa]', (3e4, 1.2e5))
-        declare('update_period', 5.0, 'period of the Eq 18 update of /sun/estimate (0: off) [s]',
-                (0.0, 3600.0))
+                0.0, 10.0)
+        declare(self, 'gain', 0.9, 'interaction-matrix gain lambda (Eq 11) [-]', 0.01, 2.0)
+        declare(self, 'delta', 1e-5, 'interaction-matrix step delta (Eq 12) [rad]', 1e-9, 0.1)
+        declare(self, 'tolerance', 1e-9, 'interaction-matrix stop on ||y_t - y_img|| [-]',
+                1e-15, 1.0)
+        declare(self, 'max_iterations', 60, 'iteration limit of either solver [-]', 1, 10000)
+        declare(self, 'site.latitude_deg', 46.5197, 'site latitude, north positive [deg]',
+                -90, 90)
+        declare(self, 'site.longitude_deg', 6.6323, 'site longitude, east positive [deg]',
+                -180, 360)
+        declare(self, 'site.elevation_m', 400.0, 'site height above sea level [m]', -500, 9000)
+        declare(self, 'site.temperature_c', 20.0, 'air temperature for refraction [degC]',
+                -60, 60)
+        declare(self, 'site.pressure_pa', 101325.0, 'air pressure for refraction [Pa]',
+                3e4, 1.2e5)
+        declare(self, 'update_period', 5.0,
+                'period of the Eq 18 update of /sun/estimate (0: off) [s]', 0.0, 3600.0)
 
     def _parameter(self, name):
         return self.get_parameter(name).value

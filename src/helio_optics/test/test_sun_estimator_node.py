@@ -1,6 +1,7 @@
 """The sun_estimator node in-process (private Context): spots in, /estimate_sun answered."""
 
 import math
+import os
 import time
 
 from helio_msgs.msg import SpotObservation, SunEstimate
@@ -13,11 +14,27 @@ import pytest
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.parameter import Parameter
+from rclpy.parameter import Parameter, parameter_value_to_python
+from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+import yaml
 
 SUN = -direction_from_angles(math.radians(40.0), math.radians(200.0))  # elevation 50 deg
+CONFIG = os.path.join(os.path.dirname(__file__), '..', 'config', 'sun_estimator.yaml')
+# The documented range of every numeric parameter (README, config/sun_estimator.yaml units):
+# what the node declared before and must keep declaring. Ints get integer ranges.
+RANGES = {
+    'lens.focal_length': (0.01, 1.0), 'lens.refractive_index': (1.01, 3.0),
+    'lens.thickness': (0.0, 0.02), 'lens.aperture_diameter': (0.001, 1.0),
+    'lens.transmission': (0.01, 1.0), 'rim_points': (8, 4096), 'contour_fraction': (0.05, 1.0),
+    'centre_sigma': (1e-6, 0.05), 'max_observations': (1, 10000),
+    'max_observation_age': (0.1, 1e6), 'joint_state_tolerance': (0.0, 10.0),
+    'gain': (0.01, 2.0), 'delta': (1e-9, 0.1), 'tolerance': (1e-15, 1.0),
+    'max_iterations': (1, 10000), 'site.latitude_deg': (-90.0, 90.0),
+    'site.longitude_deg': (-180.0, 360.0), 'site.elevation_m': (-500.0, 9000.0),
+    'site.temperature_c': (-60.0, 60.0), 'site.pressure_pa': (3e4, 1.2e5),
+    'update_period': (0.0, 3600.0)}
 
 
 def spin_until(executor, condition, timeout=10.0):
@@ -45,6 +62,64 @@ def graph():
         helper.destroy_node()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def flatten(tree, prefix=''):
+    """Flatten a ros__parameters tree into {'a.b': value}."""
+    flat = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            flat.update(flatten(value, f'{prefix}{key}.'))
+        else:
+            flat[f'{prefix}{key}'] = value
+    return flat
+
+
+def wait_for(executor, future, timeout=10.0):
+    """Spin until `future` is done and return its result; fail after `timeout` seconds."""
+    executor.spin_until_future_complete(future, timeout_sec=timeout)
+    assert future.done(), 'timed out waiting for a parameter service'
+    return future.result()
+
+
+def test_parameters_are_described_with_ranges_that_refuse_values_outside(graph):
+    node, helper, executor = graph
+    with open(CONFIG) as stream:
+        shipped = flatten(yaml.safe_load(stream)['/**']['ros__parameters'])
+    assert set(RANGES) < set(shipped)
+    client = AsyncParameterClient(helper, 'sun_estimator')
+    spin_until(executor, client.services_are_ready)
+    names = sorted(shipped)
+    descriptors = wait_for(executor, client.describe_parameters(names)).descriptors
+    values = wait_for(executor, client.get_parameters(names)).values
+    for name, descriptor, value in zip(names, descriptors, values):
+        assert descriptor.name == name and descriptor.description, name
+        if name != 'update_period':  # overridden by the fixture
+            assert parameter_value_to_python(value) == shipped[name], name
+        if name not in RANGES:
+            assert not descriptor.floating_point_range and not descriptor.integer_range, name
+            continue
+        low, high = RANGES[name]
+        assert low <= shipped[name] <= high, name
+        if isinstance(shipped[name], int):
+            (span,) = descriptor.integer_range
+            assert (span.from_value, span.to_value, span.step) == (low, high, 1), name
+        else:
+            (span,) = descriptor.floating_point_range
+            assert (span.from_value, span.to_value) == pytest.approx((low, high)), name
+
+    outside = [Parameter('rim_points', value=4097), Parameter('max_observations', value=0),
+               Parameter('site.latitude_deg', value=90.5), Parameter('gain', value=2.5),
+               Parameter('centre_sigma', value=0.0)]
+    results = wait_for(executor, client.set_parameters(outside)).results
+    assert [result.successful for result in results] == [False] * len(outside)
+    assert all(result.reason for result in results)
+    assert node.get_parameter('rim_points').value == 64
+    assert node.get_parameter('site.latitude_deg').value == shipped['site.latitude_deg']
+    inside = [Parameter('max_observations', value=10000), Parameter('gain', value=2.0)]
+    results = wait_for(executor, client.set_parameters(inside)).results
+    assert all(result.successful for result in results)
+    assert node.get_parameter('max_observations').value == 10000
 
 
 def sweep_joints(rig):
