@@ -14,7 +14,6 @@ unless --skip-sim is given.
 """
 
 import argparse
-import json
 import statistics
 import threading
 import time
@@ -24,6 +23,7 @@ from helio_drivers.dobot_client import DobotClient
 from helio_drivers.dobot_emulator import DobotEmulator
 from helio_drivers.maestro_client import MaestroClient
 from helio_drivers.maestro_emulator import MaestroEmulator
+from helio_optics.bench_report import add_json_option, report
 import numpy as np
 
 MOVES = [(0.0, 20.0, 20.0, 0.0), (30.0, 30.0, 10.0, 0.0), (-20.0, 15.0, 35.0, 10.0),
@@ -171,7 +171,7 @@ def _wait(future, timeout=30.0):
 def main(argv=None):
     """Run the benchmarks, print the figures and write them as flat JSON."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
-    parser.add_argument('--json', metavar='PATH', help='write the figures here as JSON')
+    add_json_option(parser)
     parser.add_argument('--samples', type=int, default=2000,
                         help='round trips per device (default 2000)')
     parser.add_argument('--poll-seconds', type=float, default=2.0,
@@ -189,14 +189,7 @@ def main(argv=None):
         from helio_drivers.sim_bench import bench_sim
         figures.update({name: float(value)
                         for name, value in bench_sim(skip_node=args.skip_node).items()})
-    width = max(len(name) for name in figures)
-    for name, value in figures.items():
-        print(f'{name:<{width}}  {value:10.3f}')
-    if args.json:
-        with open(args.json, 'w') as stream:
-            json.dump(figures, stream, indent=2, sort_keys=True)
-            stream.write('\n')
-    return 0
+    return report(figures, args.json)
 
 
 if __name__ == '__main__':

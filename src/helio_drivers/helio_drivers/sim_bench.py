@@ -20,7 +20,6 @@ Target (issue 6): at least 10x real time on the 2-core machine.
 """
 
 import argparse
-import json
 import os
 import statistics
 import tempfile
@@ -29,9 +28,9 @@ import time
 from helio_drivers.sim_calibration import aim
 from helio_drivers.sim_flux import irradiance_on_cells, lens_pose_in_world
 from helio_drivers.sim_world import SimSettings, SimWorld
+from helio_optics.bench_report import add_json_option, report
 from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
 from helio_optics.rig_kinematics import RigParameters
-import numpy as np
 
 
 def _median_ms(function, repeats):
@@ -151,22 +150,14 @@ def bench_sim(skip_node=False, node_seconds=15.0):
 def main(argv=None):
     """Run the benchmarks, print the figures and write them as flat JSON."""
     parser = argparse.ArgumentParser(description='Benchmarks of the simulated world.')
-    parser.add_argument('--json', metavar='PATH', help='write the figures here as JSON')
+    add_json_option(parser)
     parser.add_argument('--skip-node', action='store_true',
                         help='skip the sim_world node run (needs the built workspace)')
     parser.add_argument('--node-seconds', type=float, default=15.0,
                         help='wall time of the node run [s] (default 15)')
     args = parser.parse_args(argv)
     figures = bench_sim(args.skip_node, args.node_seconds)
-    width = max(len(name) for name in figures)
-    for name, value in figures.items():
-        print(f'{name:<{width}}  {value:10.3f}')
-    if args.json:
-        with open(args.json, 'w') as stream:
-            json.dump({k: float(np.round(v, 6)) for k, v in figures.items()}, stream,
-                      indent=2, sort_keys=True)
-            stream.write('\n')
-    return 0
+    return report({name: round(float(value), 6) for name, value in figures.items()}, args.json)
 
 
 if __name__ == '__main__':

@@ -9,10 +9,10 @@ of issue 3 (one core): >= 10 million rays/s, an estimate < 20 ms, the sweep < 10
 
 import argparse
 import datetime
-import json
 import math
 import time
 
+from helio_optics.bench_report import add_json_option, report
 from helio_optics.ephemeris import Site, sun_position
 from helio_optics.focal_calibration import paper_sweep
 from helio_optics.geometry import direction_from_angles, homogeneous, rotation_y, rotation_z
@@ -106,18 +106,10 @@ def run(quick=False):
 def main(args=None):
     """Parse arguments, run, print and optionally write JSON."""
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
-    parser.add_argument('--json', metavar='PATH', help='write the figures as flat JSON')
+    add_json_option(parser)
     parser.add_argument('--quick', action='store_true', help='fewer repetitions')
     options = parser.parse_args(args)
-    figures = run(options.quick)
-    width = max(len(name) for name in figures)
-    for name, value in figures.items():
-        print(f'{name:<{width}}  {value:.6g}')
-    if options.json:
-        with open(options.json, 'w') as stream:
-            json.dump(figures, stream, indent=2, sort_keys=True)
-            stream.write('\n')
-    return 0
+    return report(run(options.quick), options.json)
 
 
 if __name__ == '__main__':

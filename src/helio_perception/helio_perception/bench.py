@@ -18,13 +18,13 @@ calls; thermal statistics <= 0.5 ms; end-to-end latency <= 15 ms with no drops a
 """
 
 import argparse
-import json
 import os
 import subprocess
 import sys
 import time
 
 import cv2
+from helio_optics.bench_report import add_json_option, report
 from helio_perception.ground_plane import GroundMapping, MarkerDetector
 from helio_perception.spot_detection import SpotDetector, to_gray
 from helio_perception.synthetic_scene import SyntheticScene
@@ -234,7 +234,7 @@ def bench_end_to_end(width, height, rate, seconds, figures, profile=True):
 def main(argv=None):
     """Run the benchmarks, print the figures and write them as JSON."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--json', metavar='PATH', help='write the figures here')
+    add_json_option(parser)
     parser.add_argument('--repeats', type=int, default=200, help='timed calls per figure')
     parser.add_argument('--e2e-seconds', type=float, default=10.0,
                         help='duration of the end-to-end run [s] (0: skip it)')
@@ -248,14 +248,7 @@ def main(argv=None):
     if args.e2e_seconds > 0:
         bench_end_to_end(640, 480, 30.0, args.e2e_seconds, figures,
                          profile=not args.no_dds_profile)
-    for name, value in figures.items():
-        print(f'{name:48s} {value:10.3f}' if isinstance(value, float) else
-              f'{name:48s} {value:10d}')
-    if args.json:
-        with open(args.json, 'w') as stream:
-            json.dump(figures, stream, indent=2, sort_keys=True)
-            stream.write('\n')
-    return 0
+    return report(figures, args.json)
 
 
 if __name__ == '__main__':

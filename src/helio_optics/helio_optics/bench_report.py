@@ -1,0 +1,98 @@
+"""
+The common tail of every helio benchmark: ``--json PATH``, a printed table, a flat JSON file.
+
+    parser = argparse.ArgumentParser(...)
+    add_json_option(parser)
+    ...
+    return report(figures, args.json)
+
+Figures are a flat dict ``{name_with_unit: number}``, e.g. ``spot_detect_1280x720_ms_median``.
+Ints stay ints, numpy scalars become Python numbers, and a non-finite figure (nothing
+measured) is printed as ``nan``/``inf`` and written as JSON ``null``, so the file is always
+valid JSON. No rclpy import.
+"""
+
+import json
+import math
+import numbers
+import os
+import sys
+
+
+def add_json_option(parser):
+    """Add the benchmarks' ``--json PATH`` option to an argparse parser."""
+    parser.add_argument('--json', metavar='PATH',
+                        help='also write the figures to PATH as flat JSON (units in the keys; '
+                             'missing parent directories are created)')
+
+
+def flat_figures(figures):
+    """
+    Return the figures as a JSON-ready dict: str keys, int or float values, None for nan/inf.
+
+    Raise TypeError naming the key on a value that is not a real number (a string, a list, a
+    nested dict: the JSON must stay flat) and on a key that is not a string.
+    """
+    flat = {}
+    for name, value in figures.items():
+        if not isinstance(name, str):
+            raise TypeError(f'figure name {name!r} is not a string')
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise TypeError(f'figure {name} is {type(value).__name__} {value!r}, '
+                            'not a number')
+        if isinstance(value, numbers.Integral):
+            flat[name] = int(value)
+        else:
+            value = float(value)
+            flat[name] = value if math.isfinite(value) else None
+    return flat
+
+
+def format_figures(figures):
+    """Return the table of figures, one line a figure: name padded, value right-aligned."""
+    width = max((len(name) for name in figures), default=0)
+    lines = []
+    for name, value in figures.items():
+        if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+            text = f'{int(value):d}'
+        else:
+            text = f'{float(value):.6g}'
+        lines.append(f'{name:<{width}}  {text:>12}')
+    return '\n'.join(lines)
+
+
+def write_figures(figures, path):
+    """
+    Write the figures to `path` as flat, sorted, indented JSON; create missing directories.
+
+    The figures are checked (`flat_figures`) before the file is touched. Raise OSError (its
+    errno kept, so e.g. PermissionError) naming the path and the reason when the directory
+    cannot be made or the file written.
+    """
+    text = json.dumps(flat_figures(figures), indent=2, sort_keys=True, allow_nan=False) + '\n'
+    path = os.path.abspath(os.fspath(path))
+    try:
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        with open(path, 'w') as stream:
+            stream.write(text)
+    except OSError as error:
+        raise OSError(error.errno, f'cannot write the benchmark figures to {path}: '
+                                   f'{error.strerror or error}') from error
+
+
+def report(figures, json_path=None, stream=None):
+    """
+    Print every figure, then write them to `json_path` when given; return the exit status.
+
+    The table is printed first, so a failed write loses no figure: the reason goes to stderr
+    and the status is 1. A figure that is not a number is a programming error (TypeError).
+    """
+    flat_figures(figures)  # refuse a bad figure before printing anything
+    print(format_figures(figures), file=stream or sys.stdout, flush=True)
+    if json_path:
+        try:
+            write_figures(figures, json_path)
+        except OSError as error:
+            print(f'error: {error.strerror}', file=sys.stderr)
+            return 1
+    return 0

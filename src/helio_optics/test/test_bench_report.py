@@ -1,0 +1,88 @@
+"""helio_optics.bench_report: the printed table and the flat JSON every benchmark writes."""
+
+import argparse
+import json
+import math
+
+from helio_optics.bench_report import add_json_option, report, write_figures
+import numpy as np
+import pytest
+
+FIGURES = {
+    'trace_rays_per_s': 1.4321e7,
+    'estimate_levenberg_marquardt_1_spot_ms_median': 3.5,
+    'rig_forward_us_per_call': np.float64(19.25),
+    'e2e_640x480_30hz_frames_sent': 300,
+    'e2e_640x480_30hz_frames_dropped': np.int64(2),
+    'ephemeris_sun_position_ms_per_call': 0.000381,
+}
+
+
+def printed_table(capsys):
+    """Return {name: text of the value} from what report printed."""
+    lines = capsys.readouterr().out.splitlines()
+    return dict(line.split() for line in lines)
+
+
+def test_json_holds_every_figure_as_a_flat_number(tmp_path, capsys):
+    path = tmp_path / 'figures.json'
+    assert report(FIGURES, str(path)) == 0
+    text = path.read_text()
+    written = json.loads(text)
+    assert set(written) == set(FIGURES)
+    for name, value in FIGURES.items():
+        assert written[name] == value, name
+        assert isinstance(written[name], int) == isinstance(value, (int, np.integer)), name
+    assert list(written) == sorted(FIGURES)  # sorted keys: diffable between runs
+    assert text.endswith('}\n')
+
+
+def test_every_key_is_printed_once_with_its_value(capsys):
+    assert report(FIGURES) == 0
+    table = printed_table(capsys)
+    assert set(table) == set(FIGURES)
+    for name, value in FIGURES.items():
+        assert float(table[name]) == pytest.approx(float(value), rel=1e-5), name
+    assert table['e2e_640x480_30hz_frames_sent'] == '300'
+
+
+def test_missing_parent_directories_are_created(tmp_path, capsys):
+    path = tmp_path / 'bench' / 'today' / 'optics.json'
+    assert report({'a_ms': 1.0}, path) == 0
+    assert json.loads(path.read_text()) == {'a_ms': 1.0}
+
+
+def test_an_unwritable_path_is_a_clear_error_after_the_figures_are_printed(tmp_path, capsys):
+    blocker = tmp_path / 'not_a_directory'
+    blocker.write_text('')
+    path = blocker / 'figures.json'
+    assert report(FIGURES, str(path)) == 1
+    captured = capsys.readouterr()
+    assert all(name in captured.out for name in FIGURES)  # nothing measured is lost
+    assert f'cannot write the benchmark figures to {path}' in captured.err
+    with pytest.raises(OSError, match='cannot write the benchmark figures to'):
+        write_figures(FIGURES, path)
+
+
+def test_a_figure_not_measured_is_written_as_null(tmp_path, capsys):
+    path = tmp_path / 'figures.json'
+    assert report({'latency_ms_median': math.nan, 'frames': 0}, path) == 0
+    assert json.loads(path.read_text()) == {'latency_ms_median': None, 'frames': 0}
+    assert printed_table(capsys)['latency_ms_median'] == 'nan'
+
+
+@pytest.mark.parametrize('value', ['fast', [1.0, 2.0], {'ms': 1.0}, True, None])
+def test_a_figure_that_is_not_a_number_is_refused_before_anything_is_written(
+        tmp_path, capsys, value):
+    path = tmp_path / 'figures.json'
+    with pytest.raises(TypeError, match='figure bad_figure'):
+        report({'good_ms': 1.0, 'bad_figure': value}, path)
+    assert not path.exists()
+    assert capsys.readouterr().out == ''
+
+
+def test_json_option_takes_a_path_and_defaults_to_none():
+    parser = argparse.ArgumentParser()
+    add_json_option(parser)
+    assert parser.parse_args([]).json is None
+    assert parser.parse_args(['--json', '/tmp/b.json']).json == '/tmp/b.json'
