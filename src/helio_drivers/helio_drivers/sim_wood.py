@@ -21,8 +21,16 @@ Pyrolysis: an irreversible char fraction chi per surface pixel (the raster of th
 panel at the fine cell size, aligned with the fine cells), first order,
 d chi / dt = (1 - chi) A exp(-E / (R T)) where T > T_p, 0 below. Char raises the solar
 absorptance: alpha = alpha_wood + (alpha_char - alpha_wood) chi. The char raster is the
-painting. Heat of pyrolysis is neglected (the paper's lens is too weak for self-sustained
-burning, Sec. IV-B3).
+painting. The same first-order reaction runs in every cell of the patch (the wood left to
+pyrolyse per cell, 1 at the start) and takes the heat of pyrolysis, the endothermic
+decomposition plus the enthalpy the escaping volatiles carry off, per kg of wood turned: it
+is what keeps the hot spot's depth from storing the heat that would otherwise hold it at the
+camera's cap long after the retreat (Sec. IV-B3). No exothermic char oxidation or flaming:
+the paper's lens is too weak for self-sustained burning (Sec. IV-B3).
+
+Water and pyrolysis are heat sinks with a temperature recovery (an enthalpy method): per
+step, heat above the sink's temperature turns the reservoir (water, unpyrolysed wood) at the
+rate the process allows, never cooling a cell below that temperature.
 
 Units: SI, temperatures in degC at the interface, K inside the radiation law.
 """
@@ -43,7 +51,8 @@ class WoodParameters:
     """Material and surface values of the panel (sources in config/sim_world.yaml)."""
 
     density: float = 545.0              # plywood [kg/m^3]
-    conductivity: float = 0.12          # across the grain [W/(m K)]
+    conductivity: float = 0.12          # across the grain: world y and depth [W/(m K)]
+    conductivity_along_grain: float = 0.22  # along the face grain, world x [W/(m K)]
     specific_heat: float = 1215.0       # [J/(kg K)]
     thickness: float = 0.006            # panel thickness [m]
     absorptance_wood: float = 0.40      # solar absorptance of light wood [-]
@@ -59,17 +68,20 @@ class WoodParameters:
     moisture_content: float = 0.12      # water per dry wood mass (indoor wood 8-12 %) [-]
     latent_heat: float = 2.26e6         # of evaporating water [J/kg]
     boiling_temperature: float = 100.0  # where the water evaporates [degC]
+    heat_of_pyrolysis: float = 3.0e5    # endothermic, per kg of wood pyrolysed [J/kg]
 
     def __post_init__(self):
         """Reject values that describe no wood."""
-        for name in ('density', 'conductivity', 'specific_heat', 'thickness'):
+        for name in ('density', 'conductivity', 'conductivity_along_grain', 'specific_heat',
+                     'thickness'):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f'{name} must be > 0, got {getattr(self, name)}')
         for name in ('absorptance_wood', 'absorptance_char', 'emissivity', 'charred_fraction'):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f'{name} must be in [0, 1], got {getattr(self, name)}')
         for name in ('convection_top', 'convection_back', 'char_preexponential',
-                     'char_activation_energy', 'moisture_content', 'latent_heat'):
+                     'char_activation_energy', 'moisture_content', 'latent_heat',
+                     'heat_of_pyrolysis'):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
 
@@ -82,6 +94,11 @@ class WoodParameters:
     def diffusivity(self):
         """Return k / (rho c) [m^2/s]."""
         return self.conductivity / self.volumetric_heat_capacity
+
+    @property
+    def diffusivity_along_grain(self):
+        """Return k_along_grain / (rho c) [m^2/s] (world x, the face veneer's grain)."""
+        return self.conductivity_along_grain / self.volumetric_heat_capacity
 
     @property
     def thermal_effusivity_squared(self):
@@ -152,13 +169,14 @@ class EnergyLedger:
     lost_top: float = 0.0       # convection and radiation from the surface
     lost_back: float = 0.0      # convection from the back face
     evaporated: float = 0.0     # latent heat carried away by the wood's evaporated water
+    pyrolysed: float = 0.0      # heat taken by pyrolysis (reaction and volatiles)
     regrid: float = 0.0         # energy change caused by re-centring the patch
     initial_stored: float = 0.0  # heat content above ambient when the ledger started
 
     def residual(self, stored):
         """Return absorbed - lost + regrid - (stored - initial): zero if energy is conserved."""
-        return (self.absorbed - self.lost_top - self.lost_back - self.evaporated + self.regrid
-                - (stored - self.initial_stored))
+        return (self.absorbed - self.lost_top - self.lost_back - self.evaporated
+                - self.pyrolysed + self.regrid - (stored - self.initial_stored))
 
 
 def _tridiagonal_operator(edges, diffusivity):
@@ -215,6 +233,37 @@ def bilinear_weights(centres, coordinates):
     return index, weight
 
 
+def pyrolysis_rate(wood, temperature):
+    """
+    First-order pyrolysis rate of `wood` at `temperature` [degC] [1/s]: A exp(-E / (R T)).
+
+    Zero at or below the pyrolysis temperature T_p (Sec. IV-B: no charring below T_p).
+    """
+    temperature = np.asarray(temperature, dtype=float)
+    rate = wood.char_preexponential * np.exp(
+        -wood.char_activation_energy / (GAS_CONSTANT * (temperature + KELVIN)))
+    return np.where(temperature > wood.pyrolysis_temperature, rate, 0.0)
+
+
+def _take_heat(theta, reservoir, active, threshold, heat_per_unit, convertible, rho_c,
+               volumes):
+    """
+    Heat sink with temperature recovery (enthalpy method), in place; return the heat [J].
+
+    In the `active` cells (theta above `threshold` [K]) the excess heat
+    rho_c (theta - threshold) [J/m^3] turns up to `convertible` units (one value per active
+    cell) of `reservoir` (per unit volume, each unit taking `heat_per_unit` [J/m^3]): a cell
+    never cools below `threshold`.
+    """
+    if not (heat_per_unit > 0.0 and np.any(active)):
+        return 0.0
+    excess = rho_c * (theta[active] - threshold)                   # [J/m^3]
+    used = np.minimum(excess, convertible * heat_per_unit)         # [J/m^3]
+    theta[active] -= used / rho_c
+    reservoir[active] = np.maximum(reservoir[active] - used / heat_per_unit, 0.0)
+    return float(np.sum(used * np.broadcast_to(volumes, theta.shape)[active]))
+
+
 class WoodPanel:
     """
     The panel: a moving 3-D patch around the spot, a far-field column and the char raster.
@@ -245,7 +294,10 @@ class WoodPanel:
         self.z_widths = -np.diff(self.z_edges)
         self.z_centres = 0.5 * (self.z_edges[:-1] + self.z_edges[1:])
         a = self.wood.diffusivity
-        self._ops_xy = _tridiagonal_operator(self._lateral, a)
+        # The face veneer's grain runs along world x (conductivity_along_grain); across it
+        # (world y) and into the depth the wood conducts with `conductivity`.
+        self._ops_x = _tridiagonal_operator(self._lateral, self.wood.diffusivity_along_grain)
+        self._ops_y = _tridiagonal_operator(self._lateral, a)
         lower, diagonal, upper = _tridiagonal_operator(self.z_edges, a)
         rho_c = self.wood.volumetric_heat_capacity
         half_bottom = 0.5 * self.z_widths[-1]
@@ -263,6 +315,7 @@ class WoodPanel:
         water = self.wood.moisture_content * self.wood.density                # [kg/m^3]
         self.moisture = np.full(self.theta.shape, water)      # water left per cell [kg/m^3]
         self.far_moisture = np.full(len(self.z_widths), water)
+        self.unpyrolysed = np.ones(self.theta.shape)    # wood left to pyrolyse per cell [-]
         self.time = 0.0
         self.ledger = EnergyLedger()
         self.recentres = 0
@@ -455,15 +508,17 @@ class WoodPanel:
                      & (self.y_centres <= old_bounds[3]))[:, None])
         wx, wy = wx[None, None, :], wy[None, :, None]
         yy, xx = iy[:, None], ix[None, :]
-        moved = ((1 - wy) * ((1 - wx) * old_theta[:, yy, xx] + wx * old_theta[:, yy, xx + 1])
-                 + wy * ((1 - wx) * old_theta[:, yy + 1, xx]
-                         + wx * old_theta[:, yy + 1, xx + 1]))
+
+        def carry(old):
+            """Interpolate a (z, y, x) field of the old patch onto the new one."""
+            return ((1 - wy) * ((1 - wx) * old[:, yy, xx] + wx * old[:, yy, xx + 1])
+                    + wy * ((1 - wx) * old[:, yy + 1, xx] + wx * old[:, yy + 1, xx + 1]))
+
+        moved = carry(old_theta)
         self.theta = np.where(inside[None], moved, self.far_field[:, None, None])
-        old_water = self.moisture
-        water = ((1 - wy) * ((1 - wx) * old_water[:, yy, xx] + wx * old_water[:, yy, xx + 1])
-                 + wy * ((1 - wx) * old_water[:, yy + 1, xx]
-                         + wx * old_water[:, yy + 1, xx + 1]))
-        self.moisture = np.where(inside[None], water, self.far_moisture[:, None, None])
+        self.moisture = np.where(inside[None], carry(self.moisture),
+                                 self.far_moisture[:, None, None])
+        self.unpyrolysed = np.where(inside[None], carry(self.unpyrolysed), 1.0)
         self._last_absorbed = np.zeros_like(self.cell_areas)
         self._last_irradiance = np.zeros_like(self.cell_areas)
         self.ledger.regrid += self.stored_energy() - before
@@ -492,15 +547,15 @@ class WoodPanel:
         h_top, remainder = self._loss_linearisation(theta[0])
         source_top = (absorbed - remainder) / (rho_c * dz0)
 
-        ay = _apply_tridiagonal(*self._ops_xy, np.moveaxis(theta, 1, 0))
+        ay = _apply_tridiagonal(*self._ops_y, np.moveaxis(theta, 1, 0))
         ay = np.moveaxis(ay, 0, 1)
         az = self._apply_z(theta, h_top)
         rhs = theta + dt * (ay + az)
         rhs[0] += dt * source_top
         # x sweep: the x axis first
-        u1 = np.moveaxis(_solve_shifted(*self._ops_xy, dt,
+        u1 = np.moveaxis(_solve_shifted(*self._ops_x, dt,
                                         np.ascontiguousarray(np.moveaxis(rhs, 2, 0))), 0, 2)
-        u2 = np.moveaxis(_solve_shifted(*self._ops_xy, dt, np.ascontiguousarray(
+        u2 = np.moveaxis(_solve_shifted(*self._ops_y, dt, np.ascontiguousarray(
             np.moveaxis(u1 - dt * ay, 1, 0))), 0, 1)
         u3 = self._solve_z(dt, u2 - dt * az, h_top)
 
@@ -511,6 +566,7 @@ class WoodPanel:
         self.theta = u3
         volumes = self.z_widths[:, None, None] * areas[None]
         self.ledger.evaporated += self._evaporate(self.theta, self.moisture, volumes)
+        self.ledger.pyrolysed += self._pyrolyse(dt, volumes)
         self._last_absorbed = absorbed
         self._last_irradiance = irradiance
         self._step_far_field(dt, far_irradiance)
@@ -531,23 +587,35 @@ class WoodPanel:
         """
         Turn heat above the boiling point into evaporation while water is left (in place).
 
-        The enthalpy method's temperature recovery: a wet cell cannot pass T_boil; its
-        excess sensible heat rho c (T - T_boil) evaporates water (latent heat L) until the
-        cell is dry. Returns the latent heat taken [J] (cells of `volumes` [m^3]).
+        A wet cell cannot pass T_boil; its excess sensible heat evaporates water (latent heat
+        L) until the cell is dry. Returns the latent heat taken [J] (cells of `volumes` [m^3]).
         """
         w = self.wood
         if w.moisture_content == 0.0:
             return 0.0
-        rho_c = w.volumetric_heat_capacity
         boiling = w.boiling_temperature - w.ambient
         wet = (theta > boiling) & (moisture > 0.0)
-        if not np.any(wet):
+        return _take_heat(theta, moisture, wet, boiling, w.latent_heat, moisture[wet],
+                          w.volumetric_heat_capacity, volumes)
+
+    def _pyrolyse(self, dt, volumes):
+        """
+        Take the heat of pyrolysis where the wood decomposes this step (in place).
+
+        Each cell's unpyrolysed fraction f turns at the char rate k(T) (first order, the
+        surface char's kinetics): df = f (1 - exp(-k dt)), taking Delta_H rho df of heat, but
+        never cooling the cell below T_p. Returns the heat taken [J].
+        """
+        w = self.wood
+        if w.heat_of_pyrolysis == 0.0:
             return 0.0
-        excess = rho_c * (theta[wet] - boiling)                  # [J/m^3]
-        used = np.minimum(excess, moisture[wet] * w.latent_heat)
-        theta[wet] -= used / rho_c
-        moisture[wet] -= used / w.latent_heat
-        return float(np.sum(used * np.broadcast_to(volumes, theta.shape)[wet]))
+        threshold = w.pyrolysis_temperature - w.ambient
+        hot = self.theta > threshold
+        rate = pyrolysis_rate(w, self.theta[hot] + w.ambient)
+        convertible = self.unpyrolysed[hot] * -np.expm1(-rate * dt)
+        return _take_heat(self.theta, self.unpyrolysed, hot, threshold,
+                          w.heat_of_pyrolysis * w.density, convertible,
+                          w.volumetric_heat_capacity, volumes)
 
     def _update_char(self, dt):
         """Advance the char fraction where the surface passed T_p (fine region only)."""
@@ -561,9 +629,7 @@ class WoodPanel:
             self.coarse_overheat = True
         if not np.any(hot):
             return
-        t_kelvin = surface[fine] + KELVIN
-        rate = np.where(hot, w.char_preexponential
-                        * np.exp(-w.char_activation_energy / (GAS_CONSTANT * t_kelvin)), 0.0)
+        rate = pyrolysis_rate(w, surface[fine])
         chi = self.char[self._raster_fine]
         rows, cols = self._raster_fine
         box = (rows.start, rows.stop, cols.start, cols.stop)

@@ -29,5 +29,5 @@ def test_paper_figures_are_reproduced_and_printed():
     assert 10.0 <= figures.time_to_np <= 30.0
     assert 1.5e-3 <= figures.dot_diameter_at_np <= 2.5e-3
     assert 1.5e-3 <= figures.final_dot_diameter <= 2.7e-3
-    assert 1.5 <= figures.cap_hold_after_retreat <= 5.0
+    assert 2.0 <= figures.cap_hold_after_retreat <= 4.0
     assert figures.time_to_np_zero < 10.0

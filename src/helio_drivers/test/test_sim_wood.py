@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 LOSSLESS = {'convection_top': 0.0, 'convection_back': 0.0, 'emissivity': 0.0,
-            'moisture_content': 0.0}
+            'moisture_content': 0.0, 'heat_of_pyrolysis': 0.0}
 
 
 def disk_irradiance(panel, radius, flux, centre=(0.0, 0.0), samples=8):
@@ -41,10 +41,29 @@ def test_semi_infinite_solid_under_uniform_flux_matches_closed_form():
         assert rise == pytest.approx(exact, rel=0.02)
 
 
-def test_steady_disk_source_centre_temperature_matches_closed_form():
-    # Semi-infinite solid, uniform flux q on a disk of radius a: centre rise q a / k.
+def disk_centre_rise(flux, radius, k_x, k_y, k_z, samples=20000):
+    """
+    Steady centre rise of a uniform disk source on an anisotropic half-space [K].
+
+    Scaling x by sqrt(k_x), y by sqrt(k_y), z by sqrt(k_z) makes the conduction isotropic
+    with unit conductivity and flux q / sqrt(k_z); the disk becomes an ellipse of semi-axes
+    a / sqrt(k_x), a / sqrt(k_y), and the centre rise is (q / sqrt(k_z)) / (2 pi) times the
+    integral of the ellipse radius over the angle (isotropic: q a / k).
+    """
+    phi = (np.arange(samples) + 0.5) * (2.0 * math.pi / samples)
+    semi_x, semi_y = radius / math.sqrt(k_x), radius / math.sqrt(k_y)
+    ellipse_radius = 1.0 / np.sqrt((np.cos(phi) / semi_x) ** 2 + (np.sin(phi) / semi_y) ** 2)
+    integral = float(np.sum(ellipse_radius)) * (2.0 * math.pi / samples)
+    return flux / math.sqrt(k_z) * integral / (2.0 * math.pi)
+
+
+@pytest.mark.parametrize('along_grain', [0.12, 0.22], ids=['isotropic', 'plywood_grain'])
+def test_steady_disk_source_centre_temperature_matches_closed_form(along_grain):
+    # Semi-infinite solid, uniform flux q on a disk of radius a: centre rise q a / k when
+    # isotropic; with the face grain along x, the closed form of disk_centre_rise.
     wood = WoodParameters(thickness=0.04, absorptance_wood=1.0, convection_top=0.0,
-                          convection_back=1e6, emissivity=0.0, moisture_content=0.0)
+                          convection_back=1e6, emissivity=0.0, moisture_content=0.0,
+                          conductivity=0.12, conductivity_along_grain=along_grain)
     grid = GridParameters(fine_cell=1.25e-4, fine_half_width=2e-3, half_width=0.04,
                           lateral_growth=1.3, top_layer=3e-5, depth_growth=1.3,
                           recentre_margin=0.0)
@@ -61,10 +80,34 @@ def test_steady_disk_source_centre_temperature_matches_closed_form():
         if abs(centre - previous) < 1e-4 * centre:
             break
         previous = centre
-    exact = flux * radius / wood.conductivity
-    print(f'steady disk centre rise: sim {centre:.2f} K, closed form {exact:.2f} K '
-          f'after {cycle + 1} cycles')
+    exact = disk_centre_rise(flux, radius, wood.conductivity_along_grain, wood.conductivity,
+                             wood.conductivity)
+    if along_grain == wood.conductivity:
+        assert exact == pytest.approx(flux * radius / wood.conductivity, rel=1e-6)
+    print(f'steady disk centre rise (k along grain {along_grain}): sim {centre:.2f} K, '
+          f'closed form {exact:.2f} K after {cycle + 1} cycles')
     assert centre == pytest.approx(exact, rel=0.05)
+
+
+def test_heat_spreads_faster_along_the_grain_as_diffusion_predicts():
+    # An initial Gaussian hot line pattern, lossless: each lateral variance grows by 2 a t.
+    wood = WoodParameters(**LOSSLESS)
+    panel = WoodPanel(wood, extent=(-0.03, 0.03, -0.03, 0.03))
+    x, y = np.meshgrid(panel.x_centres, panel.y_centres)
+    sigma0 = 0.8e-3
+    panel.theta[:] = 50.0 * np.exp(-(x ** 2 + y ** 2) / (2.0 * sigma0 ** 2))[None]
+    duration = 4.0
+    for _ in range(80):
+        panel.step(duration / 80, np.zeros(panel.cell_areas.shape))
+    weights = panel.theta.sum(axis=0) * panel.cell_areas
+    variance_x = float(np.sum(weights * x ** 2) / np.sum(weights))
+    variance_y = float(np.sum(weights * y ** 2) / np.sum(weights))
+    expected_x = sigma0 ** 2 + 2.0 * wood.diffusivity_along_grain * duration
+    expected_y = sigma0 ** 2 + 2.0 * wood.diffusivity * duration
+    print(f'lateral variance after {duration} s [mm^2]: x {variance_x * 1e6:.4f} '
+          f'(2 a t: {expected_x * 1e6:.4f}), y {variance_y * 1e6:.4f} ({expected_y * 1e6:.4f})')
+    assert variance_x == pytest.approx(expected_x, rel=0.03)
+    assert variance_y == pytest.approx(expected_y, rel=0.03)
 
 
 def gaussian_irradiance(panel, centre, power, width):
@@ -88,10 +131,11 @@ def test_energy_balance_over_a_run_with_losses_moves_and_charring():
     stored = panel.stored_energy() - ledger.initial_stored
     print(f'absorbed {ledger.absorbed:.3f} J, stored {stored:.3f} J, lost top '
           f'{ledger.lost_top:.3f} J, back {ledger.lost_back:.3f} J, evaporated '
-          f'{ledger.evaporated:.3f} J, regrid {ledger.regrid:.3f} J')
+          f'{ledger.evaporated:.3f} J, pyrolysis {ledger.pyrolysed:.3f} J, '
+          f'regrid {ledger.regrid:.3f} J')
     assert panel.recentres >= 1
     assert ledger.lost_top > 0.05 * ledger.absorbed and ledger.lost_back > 0.0
-    assert ledger.evaporated > 0.01 * ledger.absorbed
+    assert ledger.evaporated > 0.01 * ledger.absorbed and ledger.pyrolysed > 0.0
     assert abs(ledger.residual(panel.stored_energy())) < 0.01 * ledger.absorbed
     assert panel.char.max() > 0.5  # the run was hot enough to char
 
@@ -127,6 +171,13 @@ def test_char_is_irreversible_raises_absorptance_and_needs_pyrolysis_temperature
     assert panel.surface_temperature().max() < wood.pyrolysis_temperature
     assert np.all(panel.char >= charred)
     assert panel.char_at(0.0, 0.0) > 0.9 and panel.char_at(0.01, 0.01) == 0.0
+    # The heat of pyrolysis taken is Delta_H per kg of the wood that turned, and only wood
+    # that passed T_p turned.
+    volumes = panel.z_widths[:, None, None] * panel.cell_areas[None]
+    turned = wood.density * float(np.sum(volumes * (1.0 - panel.unpyrolysed)))
+    assert turned > 0.0 and np.all(panel.unpyrolysed >= 0.0)
+    assert panel.ledger.pyrolysed == pytest.approx(wood.heat_of_pyrolysis * turned, rel=1e-9)
+    assert np.all(panel.unpyrolysed[:, 0, :] == 1.0)  # the patch edge never reached T_p
 
 
 def test_bad_input_is_refused_and_leaves_the_state_unchanged():

@@ -1,6 +1,9 @@
 """Node sim_world in-process: /clock, camera topics on simulated time, canvas, parameters."""
 
-from helio_drivers.sim_world_node import SimWorldNode
+import os
+
+from helio_drivers.sim_world import flat_settings, SimSettings
+from helio_drivers.sim_world_node import PARAMETER_DOCS, SimWorldNode
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -9,6 +12,7 @@ from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 from test_sim_world import RIG_YAML
+import yaml
 
 
 @pytest.fixture
@@ -83,3 +87,24 @@ def test_sim_world_publishes_clock_cameras_and_canvas_on_sim_time(context, tmp_p
         probe.destroy_node()
     assert (tmp_path / 'out' / 'canvas.png').exists()
     assert (tmp_path / 'out' / 'dots.csv').exists()
+
+
+def test_config_file_documents_every_world_setting_with_the_code_defaults():
+    # config/sim_world.yaml is what users edit: it must name every world setting, with the
+    # defaults SimWorld uses without it, and each must have a description and range.
+    path = os.path.join(os.path.dirname(__file__), '..', 'config', 'sim_world.yaml')
+    with open(path, encoding='utf-8') as stream:
+        config = yaml.safe_load(stream)['/**']['ros__parameters']
+    defaults = flat_settings(SimSettings())
+    optional = {'cloud_schedule'}   # commented out in the file: no scheduled cloud
+    missing = set(defaults) - set(config) - optional
+    assert not missing, f'sim_world.yaml lacks {sorted(missing)}'
+    undocumented = set(defaults) - set(PARAMETER_DOCS)
+    assert not undocumented, f'no description/range for {sorted(undocumented)}'
+    for name, default in defaults.items():
+        if name in config:
+            value = config[name]
+            if isinstance(default, float):
+                assert value == pytest.approx(default), name
+            else:
+                assert value == default, name
