@@ -53,7 +53,7 @@ class Demo:
         device_settings = DeviceSettings(dobot_port=os.path.join(port_dir, 'dobot'),
                                          servo_port=os.path.join(port_dir, 'servo'))
         self.devices = SimDevices(self.world.clock, device_settings)
-        self.world._joints_source = self.devices.joint_positions
+        self.world.attach_joint_source(self.devices.joint_positions)
         self.dobot = DobotClient(device_settings.dobot_port)
         self.servo = MaestroClient(device_settings.servo_port)
         self.dobot.connect()

@@ -138,9 +138,9 @@ class SimWorld:
         """
         Build the world. `joints` is a callable returning x (5,) [rad] at the clock's time.
 
-        Without it, set the joints with ``set_joints`` (tests) or host the emulators
-        (``helio_drivers.sim_devices.SimDevices(world.clock)``) and pass their
-        ``joint_positions``.
+        Without it, set the joints with ``set_joints`` (tests) or host the emulators on the
+        world's clock (``SimDevices(world.clock)``) and attach their ``joint_positions`` with
+        ``attach_joint_source``.
         """
         self.settings = settings or SimSettings()
         s = self.settings
@@ -179,6 +179,12 @@ class SimWorld:
     def time(self):
         """Return the simulated seconds since the start."""
         return self.clock()
+
+    def attach_joint_source(self, source):
+        """Read the joints from `source()` -> x (5,) [rad] from now on (e.g. the emulators)."""
+        if not callable(source):
+            raise TypeError(f'the joint source must be callable, got {type(source).__name__}')
+        self._joints_source = source
 
     def set_joints(self, x):
         """Put the rig at x (5,) [rad] (when no joint source is attached)."""

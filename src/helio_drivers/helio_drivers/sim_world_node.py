@@ -153,7 +153,7 @@ class SimWorldNode(Node):
                 'Dobot j1..j4 at start [deg]', None)))
         self.world = SimWorld(self.settings, self._rig_parameters(rig_file))
         self.devices = SimDevices(self.world.clock, devices)
-        self.world._joints_source = self.devices.joint_positions
+        self.world.attach_joint_source(self.devices.joint_positions)
         dobot_port, servo_port = self.devices.ports
         self.get_logger().info(
             f'emulated Dobot on {dobot_port} ({self.devices.dobot.device_name}), Maestro on '

@@ -17,7 +17,7 @@ def test_moving_the_arm_through_the_drivers_moves_both_camera_views(tmp_path):
     settings = DeviceSettings(dobot_port=str(tmp_path / 'dobot'),
                               servo_port=str(tmp_path / 'servo'))
     devices = SimDevices(world.clock, settings)
-    world._joints_source = devices.joint_positions
+    world.attach_joint_source(devices.joint_positions)
     dobot = DobotClient(settings.dobot_port)
     servo = MaestroClient(settings.servo_port)
     try:

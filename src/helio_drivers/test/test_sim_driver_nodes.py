@@ -126,7 +126,7 @@ class SimRig:
         self.devices = SimDevices(self.world.clock, DeviceSettings(
             dobot_port=os.path.join(port_dir, 'dobot'),
             servo_port=os.path.join(port_dir, 'servo')))
-        self.world._joints_source = self.devices.joint_positions   # as sim_world_node does
+        self.world.attach_joint_source(self.devices.joint_positions)   # as sim_world_node does
         self.stepper = WorldStepper(self.world)
         self.graph = self.servo = None
         dobot_port, servo_port = self.devices.ports
