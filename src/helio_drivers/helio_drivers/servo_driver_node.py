@@ -6,33 +6,30 @@ Node servo_driver: the two wrist servos (lens yaw, lens pitch) on a Pololu Maest
   config/servo_driver.yaml); an angle outside a channel's pulse range is refused naming the
   joint. The goal succeeds when both reported positions are within
   ``position_tolerance_us`` of their targets; feedback carries the current angles. Cancel
-  holds both servos where they are.
+  holds both servos where they are, and so does a move longer than ``move_timeout_s`` on the
+  node clock (or ``move_wall_timeout_s`` of wall time), which is aborted.
 - ``joint_states``: lens_yaw, lens_pitch [rad] at ``joint_state_rate_hz``.
 - ``servo/status`` (helio_msgs/DeviceStatus): link state, reconnect attempts, Maestro errors.
 
 A lost port is reopened with exponential backoff while goals abort at once; on shutdown
-both servos are held at their current positions.
+both servos are held at their current positions. The link, the device thread and the
+action plumbing are ``device_action_node.DeviceActionNode``'s.
 """
 
-import threading
-import time
-
 from helio_drivers import maestro_protocol as proto
+from helio_drivers.device_action_node import (
+    DeviceActionNode, DeviceSpec, GoalRefused, MoveProgress)
 from helio_drivers.maestro_client import MaestroClient
-from helio_drivers.node_support import device_status
-from helio_drivers.serial_link import DeviceError, LinkError, ReconnectBackoff
 from helio_msgs.action import MoveWrist
-from helio_msgs.msg import DeviceStatus
 from helio_optics.node_parameters import declare
 import rclpy
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
-from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import JointState
+from rclpy.executors import ExternalShutdownException
 
 AXES = ('yaw', 'pitch')
+
+SPEC = DeviceSpec(device='servo', label='servo controller', action_name='move_wrist',
+                  port='/dev/ttyACM0', baudrate_max=250000, timeout_s=0.1,
+                  move_timeout_s=10.0, move_timeout_max_s=600.0)
 
 
 def declare_calibration(node, axis, joint_name, channel):
@@ -62,29 +59,12 @@ def declare_calibration(node, axis, joint_name, channel):
     return calibration, proto.speed_units(speed), proto.acceleration_units(acceleration)
 
 
-class ServoDriverNode(Node):
+class ServoDriverNode(DeviceActionNode):
     """Serial driver of the lens wrist servos; see the module docstring."""
 
     def __init__(self, **kwargs):
-        """Declare parameters, create the interfaces and try to connect."""
-        super().__init__('servo_driver', **kwargs)
-        self.port = declare(self, 'port', '/dev/ttyACM0',
-                            'Serial port of the Maestro (command port or the emulator link).')
-        baudrate = declare(self, 'baudrate', 115200, 'Serial baud rate [bit/s].', 1200, 250000)
-        timeout = declare(self, 'timeout_s', 0.1, 'Reply timeout per attempt [s].', 0.005, 10.0)
-        retries = declare(self, 'retries', 2, 'Extra attempts after a missing reply.', 0, 10)
-        rate = declare(self, 'joint_state_rate_hz', 20.0,
-                       'Rate of position polling and /joint_states [Hz].', 0.1, 200.0)
-        status_period = declare(self, 'status_period_s', 1.0,
-                                'Period of servo/status and error polling [s].', 0.05, 60.0)
-        initial = declare(self, 'reconnect_initial_s', 0.2,
-                          'First delay before reopening a lost port [s].', 0.01, 60.0)
-        maximum = declare(self, 'reconnect_max_s', 5.0,
-                          'Longest delay between reconnect attempts [s].', 0.01, 600.0)
-        self.poll_period = declare(self, 'poll_period_s', 0.02,
-                                   'Period of position polling during a move [s].', 0.001, 1.0)
-        self.move_timeout = declare(self, 'move_timeout_s', 10.0,
-                                    'Longest time a wrist move may take [s].', 0.1, 600.0)
+        """Declare parameters, create the interfaces and start the device thread."""
+        super().__init__('servo_driver', SPEC, MoveWrist, MaestroClient, **kwargs)
         self.tolerance_qus = 4.0 * declare(
             self, 'position_tolerance_us', 1.0,
             'A servo has arrived when within this pulse width of its target [us].', 0.25, 100.0)
@@ -94,60 +74,7 @@ class ServoDriverNode(Node):
         channels = [c.channel for c, _, _ in self.axes.values()]
         if len(set(channels)) != len(channels):
             raise ValueError(f'yaw and pitch need different channels, got {channels}')
-
-        self.client = MaestroClient(self.port, baudrate, timeout, retries)
-        self.backoff = ReconnectBackoff(initial, maximum)
-        self._message = ''
-        self._errors = []
-        self._goal_lock = threading.Lock()
-        self._active_goal = None
-        self._wake = threading.Event()
-
-        self.joint_publisher = self.create_publisher(JointState, 'joint_states', 10)
-        self.status_publisher = self.create_publisher(
-            DeviceStatus, 'servo/status',
-            QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        link_group = MutuallyExclusiveCallbackGroup()
-        self.create_timer(1.0 / rate, self._poll, callback_group=link_group)
-        self.create_timer(status_period, self._poll_status, callback_group=link_group)
-        self.action_server = ActionServer(
-            self, MoveWrist, 'move_wrist', self._execute, goal_callback=self._accept_goal,
-            cancel_callback=self._accept_cancel, callback_group=ReentrantCallbackGroup())
-        self._connect()
-
-    # ---- link -------------------------------------------------------------------------------
-
-    def _connect(self):
-        try:
-            self.client.connect()
-            for calibration, speed, acceleration in self.axes.values():
-                self.client.set_speed(calibration.channel, speed)
-                self.client.set_acceleration(calibration.channel, acceleration)
-            self.client.get_errors()          # the device answers (and stale errors go)
-        except DeviceError as error:
-            self.client.close()
-            delay = self.backoff.failed(time.monotonic())
-            self._message = f'{error}; retrying in {delay:.2f} s'
-            self.get_logger().warning(self._message, throttle_duration_sec=5.0)
-            self._publish_status()
-            return False
-        attempts = self.backoff.attempts
-        self.backoff.succeeded()
-        self._message = f'connected to {self.port}' + (
-            f' after {attempts} attempts' if attempts else '')
-        self.get_logger().info(self._message)
-        self._publish_status()
-        return True
-
-    def _link_lost(self, error):
-        self.client.close()
-        if self.backoff.attempts == 0:
-            self.backoff.failed(time.monotonic())
-        self._message = f'link lost: {error}'
-        self.get_logger().error(self._message)
-        self._wake.set()
-        self._publish_status()
+        self.start_device()
 
     def _positions_qus(self):
         return {axis: self.client.get_position(c.channel)
@@ -156,73 +83,9 @@ class ServoDriverNode(Node):
     def _angles(self, positions_qus):
         return {axis: self.axes[axis][0].angle(q / 4.0) for axis, q in positions_qus.items()}
 
-    def _poll(self):
-        if not self.client.connected:
-            if self.backoff.due(time.monotonic()):
-                self._connect()
-            return
-        try:
-            angles = self._angles(self._positions_qus())
-        except DeviceError as error:
-            self._link_lost(error)
-            return
-        message = JointState()
-        message.header.stamp = self.get_clock().now().to_msg()
-        message.name = [self.axes[axis][0].name for axis in AXES]
-        message.position = [float(angles[axis]) for axis in AXES]
-        self.joint_publisher.publish(message)
-
-    def _poll_status(self):
-        if self.client.connected:
-            try:
-                errors = self.client.get_errors()
-            except DeviceError as error:
-                self._link_lost(error)
-                return
-            self._errors = proto.error_descriptions(errors)
-            if errors:
-                self.get_logger().warning(f'Maestro errors: {", ".join(self._errors)}')
-        self._publish_status()
-
-    def _publish_status(self):
-        self.status_publisher.publish(device_status(
-            self.get_clock().now(), 'servo', self.port, self.client.connected,
-            self.backoff.attempts, self._errors, self._message))
-
-    # ---- action -----------------------------------------------------------------------------
-
-    def _accept_goal(self, goal):
-        with self._goal_lock:
-            if self._active_goal is not None:
-                self.get_logger().warning('move_wrist goal rejected: another move is running')
-                return GoalResponse.REJECT
-            self._active_goal = goal
-        return GoalResponse.ACCEPT
-
-    def _accept_cancel(self, goal_handle):
-        self._wake.set()
-        return CancelResponse.ACCEPT
-
-    def _execute(self, goal_handle):
-        try:
-            return self._run_goal(goal_handle)
-        finally:
-            with self._goal_lock:
-                self._active_goal = None
-
-    def _finish(self, goal_handle, outcome, message, positions_qus=None):
-        result = MoveWrist.Result()
-        result.success = outcome == 'succeed'
-        result.message = message
-        if positions_qus is not None:
-            angles = self._angles(positions_qus)
-            result.achieved_yaw, result.achieved_pitch = angles['yaw'], angles['pitch']
-        getattr(goal_handle, outcome)()
-        if result.success:
-            self.get_logger().info(f'move_wrist {outcome}: {message}')
-        else:
-            self.get_logger().warning(f'move_wrist {outcome}: {message}')
-        return result
+    def _result(self, positions_qus):
+        angles = self._angles(positions_qus)
+        return MoveWrist.Result(achieved_yaw=angles['yaw'], achieved_pitch=angles['pitch'])
 
     def _hold(self):
         """Stop both servos where they are (target = current position); return positions."""
@@ -232,63 +95,57 @@ class ServoDriverNode(Node):
         # Set Target has no reply: a query answered after it proves the device has it.
         return self._positions_qus()
 
-    def _run_goal(self, goal_handle):
-        goal = goal_handle.request
-        if not self.client.connected:
-            return self._finish(goal_handle, 'abort',
-                                f'servo controller not connected on {self.port} '
-                                f'({self._message}); reconnecting in the background')
-        try:
-            targets = {'yaw': self.axes['yaw'][0].quarter_us(goal.yaw),
-                       'pitch': self.axes['pitch'][0].quarter_us(goal.pitch)}
-        except ValueError as error:
-            return self._finish(goal_handle, 'abort', f'wrist target refused: {error}')
-        self._wake.clear()
-        try:
-            for axis, target in targets.items():
-                self.client.set_target(self.axes[axis][0].channel, target)
-            deadline = time.monotonic() + self.move_timeout
-            while True:
-                if goal_handle.is_cancel_requested:
-                    positions = self._hold()
-                    return self._finish(goal_handle, 'canceled',
-                                        'canceled: servos held where they were', positions)
-                positions = self._positions_qus()
-                if all(abs(positions[a] - targets[a]) <= self.tolerance_qus for a in targets):
-                    return self._finish(goal_handle, 'succeed', 'wrist at target', positions)
-                if time.monotonic() > deadline:
-                    positions = self._hold()
-                    return self._finish(goal_handle, 'abort',
-                                        f'servos not at target within {self.move_timeout:.1f} '
-                                        's; held where they were', positions)
-                angles = self._angles(positions)
-                goal_handle.publish_feedback(MoveWrist.Feedback(
-                    current_yaw=angles['yaw'], current_pitch=angles['pitch']))
-                if not self.client.connected:
-                    raise LinkError('link lost during the move')
-                self._wake.wait(self.poll_period)
-        except LinkError as error:
-            self._link_lost(error)
-            return self._finish(goal_handle, 'abort', f'link lost, move aborted: {error}')
-        except DeviceError as error:
-            return self._finish(goal_handle, 'abort', f'device error, move aborted: {error}')
+    # ---- device hooks -----------------------------------------------------------------------
 
-    # ---- shutdown ---------------------------------------------------------------------------
+    def configure_device(self):
+        """Set each channel's speed and acceleration limits; check the Maestro answers."""
+        for calibration, speed, acceleration in self.axes.values():
+            self.client.set_speed(calibration.channel, speed)
+            self.client.set_acceleration(calibration.channel, acceleration)
+        self.client.get_errors()          # the device answers (and stale errors go)
+
+    def read_joints(self):
+        """Return the joint names and the yaw, pitch angles [rad]."""
+        angles = self._angles(self._positions_qus())
+        return [self.axes[axis][0].name for axis in AXES], [angles[axis] for axis in AXES]
+
+    def read_alarms(self):
+        """Return (and clear) the Maestro's error bits by name, logging any."""
+        errors = proto.error_descriptions(self.client.get_errors())
+        if errors:
+            self.get_logger().warning(f'Maestro errors: {", ".join(errors)}')
+        return errors
+
+    def plan_move(self, goal):
+        """Return each axis's target [quarter-us]; an angle out of range names the joint."""
+        try:
+            return {axis: self.axes[axis][0].quarter_us(getattr(goal, axis)) for axis in AXES}
+        except ValueError as error:
+            raise GoalRefused(f'wrist target refused: {error}') from error
+
+    def start_move(self, plan):
+        """Set both targets."""
+        for axis, target in plan.items():
+            self.client.set_target(self.axes[axis][0].channel, target)
+        return plan
+
+    def poll_move(self, move):
+        """Done when both read-back positions are within the tolerance of their targets."""
+        positions = self._positions_qus()
+        if all(abs(positions[a] - move[a]) <= self.tolerance_qus for a in move):
+            return MoveProgress(done=True, success=True, message='wrist at target',
+                                result=self._result(positions))
+        angles = self._angles(positions)
+        return MoveProgress(feedback=MoveWrist.Feedback(current_yaw=angles['yaw'],
+                                                        current_pitch=angles['pitch']))
+
+    def stop_move(self, move):
+        """Hold both servos where they are; return where that is."""
+        return self._result(self._hold()), 'servos held where they were'
 
     def stop_device(self):
-        """Leave the servos stopped: hold them at their current positions (best effort)."""
-        if self.client.connected:
-            try:
-                self._hold()
-            except DeviceError as error:
-                self.get_logger().warning(f'could not stop the servos on shutdown: {error}')
-        self.client.close()
-
-    def destroy_node(self):
-        """Stop the device, then destroy the node."""
-        self.stop_device()
-        self.action_server.destroy()
-        return super().destroy_node()
+        """Leave the servos stopped: hold them at their current positions."""
+        self._hold()
 
 
 def main(args=None):
@@ -297,9 +154,7 @@ def main(args=None):
     node = None
     try:
         node = ServoDriverNode()
-        executor = MultiThreadedExecutor(num_threads=3)
-        executor.add_node(node)
-        executor.spin()
+        rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -5,7 +5,7 @@ import time
 
 import rclpy
 from rclpy.action import ActionClient
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
@@ -40,7 +40,8 @@ class DriverGraph:
             self.node.create_subscription(
                 DeviceStatus, status_topic, self._status,
                 QoSProfile(depth=20, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-            self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
+            # One thread, as rclpy.spin runs the nodes: no driver callback waits on a device.
+            self.executor = SingleThreadedExecutor(context=self.context)
             self.executor.add_node(self.driver)
             self.executor.add_node(self.node)
             self.thread = threading.Thread(target=self.executor.spin, daemon=True)

@@ -98,11 +98,6 @@ def test_cancel_mid_move_stops_the_arm_and_clears_the_queue(graph):
     assert graph.move(MoveArm.Goal.MOVJ_ANGLE, (0.0, 0.2, 0.2, 0.0)).result.success
 
 
-# Rerun at most twice, bound unchanged: about one run in three a process-wide stall of ~0.9 s
-# (both driver threads idle until the poll timer's reconnect attempt returns; not GC, not the
-# serial client, which fails at once) delays the abort. Root cause open: see the README of
-# this package.
-@pytest.mark.flaky(reruns=2)
 def test_unplug_mid_move_aborts_within_half_a_second_then_reconnects(graph):
     emulator, graph = graph
     on_feedback, moving = passed_j1(5.0)

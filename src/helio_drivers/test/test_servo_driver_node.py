@@ -116,11 +116,6 @@ def test_cancel_holds_the_servos_mid_move(wrist, clock):
     assert response.result.achieved_pitch == pytest.approx(held, abs=0.05)
 
 
-# Rerun at most twice, bound unchanged: about one run in three a process-wide stall of ~0.9 s
-# (both driver threads idle until the poll timer's reconnect attempt returns; not GC, not the
-# serial client, which fails at once) delays the abort. Root cause open: see the README of
-# this package.
-@pytest.mark.flaky(reruns=2)
 def test_unplug_aborts_and_reconnects(wrist):
     emulator, graph = wrist
     started = threading.Event()
