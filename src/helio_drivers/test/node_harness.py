@@ -8,6 +8,8 @@ from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.time import Time
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 
@@ -82,3 +84,31 @@ class DriverGraph:
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
         self.thread.join(timeout=5.0)
+
+
+class SimClock:
+    """Publish /clock from `node` at `rate` times real time (0: a stopped simulation)."""
+
+    def __init__(self, node, rate, start_s=1000.0, period_s=0.005):
+        self.rate = rate
+        self.start_s = start_s
+        self.period_s = period_s
+        self.publisher = node.create_publisher(Clock, '/clock', 10)
+        self._started = time.monotonic()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def now_s(self):
+        """Return the simulated time being published [s]."""
+        return self.start_s + self.rate * (time.monotonic() - self._started)
+
+    def _run(self):
+        while not self._stop.is_set():
+            self.publisher.publish(Clock(clock=Time(seconds=self.now_s()).to_msg()))
+            self._stop.wait(self.period_s)      # pacing the publisher, not synchronising
+
+    def stop(self):
+        """Stop publishing."""
+        self._stop.set()
+        self._thread.join(timeout=5.0)

@@ -1,5 +1,6 @@
-"""dobot_driver in-process against the emulator on a pty: moves, limits, cancel, unplug."""
+"""dobot_driver in-process against the emulator on a pty: moves, limits, cancel, unplug, time."""
 
+import contextlib
 import math
 import threading
 import time
@@ -8,19 +9,20 @@ from helio_drivers.dobot_driver_node import DobotDriverNode
 from helio_drivers.dobot_emulator import DobotEmulator
 from helio_msgs.action import MoveArm
 from helio_optics.arm_kinematics import DobotArm
-from node_harness import DriverGraph, wait_for
+from node_harness import DriverGraph, SimClock, wait_for
 import pytest
 
 
 class Graph(DriverGraph):
     """dobot_driver on the emulator's pty with fast motion and short timeouts."""
 
-    def __init__(self, emulator):
+    def __init__(self, emulator, **overrides):
         super().__init__(DobotDriverNode, MoveArm, 'move_arm', 'dobot/status', {
             'port': emulator.port_path, 'timeout_s': 0.1, 'retries': 1,
             'joint_state_rate_hz': 50.0, 'status_period_s': 0.2,
             'reconnect_initial_s': 0.05, 'reconnect_max_s': 0.2,
-            'joint_velocity_dps': [60.0] * 4, 'joint_acceleration_dps2': [400.0] * 4})
+            'joint_velocity_dps': [60.0] * 4, 'joint_acceleration_dps2': [400.0] * 4,
+            **overrides})
 
     def send(self, mode, target, feedback=None):
         return super().send(MoveArm.Goal(mode=mode, target=[float(v) for v in target]),
@@ -120,3 +122,47 @@ def test_unplug_mid_move_aborts_within_half_a_second_then_reconnects(graph):
     emulator.reconnect()
     assert graph.wait_status(lambda s: s.connected)
     assert graph.move(MoveArm.Goal.MOVJ_ANGLE, (0.0, 0.2, 0.2, 0.0)).result.success
+
+
+# j1 0 -> 85 deg at 60 deg/s and 400 deg/s^2: a trapezoid of 85/60 + 60/400 = 1.57 s.
+LONG_MOVE = (math.radians(85.0), 0.2, 0.2, 0.0)
+SLOW_SIM = 0.25          # the simulated clock runs at a quarter of real time
+
+
+@contextlib.contextmanager
+def sim_time_graph(move_timeout_s):
+    """Run dobot_driver with use_sim_time, move_timeout_s [sim s], /clock at SLOW_SIM."""
+    with DobotEmulator() as emulator:
+        graph = Graph(emulator, use_sim_time=True, move_timeout_s=move_timeout_s)
+        clock = SimClock(graph.node, SLOW_SIM)
+        try:
+            yield emulator, graph
+        finally:
+            clock.stop()
+            graph.close()
+
+
+def test_under_a_slow_sim_clock_a_move_longer_in_wall_time_than_its_timeout_succeeds():
+    with sim_time_graph(move_timeout_s=1.0) as (emulator, graph):
+        started = time.monotonic()
+        response = graph.move(MoveArm.Goal.MOVJ_ANGLE, LONG_MOVE)
+        wall = time.monotonic() - started
+        assert response.result.success, response.result.message
+        assert wall > 1.0      # longer in wall time than the timeout; 0.4 s of sim time
+        assert emulator.joint_positions_deg()[0] == pytest.approx(85.0, abs=1e-3)
+
+
+def test_under_a_slow_sim_clock_a_move_past_its_timeout_in_sim_seconds_aborts():
+    with sim_time_graph(move_timeout_s=0.2) as (emulator, graph):
+        started = time.monotonic()
+        response = graph.move(MoveArm.Goal.MOVJ_ANGLE, LONG_MOVE)
+        wall = time.monotonic() - started
+        assert not response.result.success
+        assert 'within 0.20 s on the node clock' in response.result.message
+        assert 'arm force-stopped' in response.result.message
+        # 0.2 s of sim time is 0.2 / SLOW_SIM = 0.8 s of wall time, not a wall-clock 0.2 s
+        assert wall > 0.9 * 0.2 / SLOW_SIM
+        stopped = emulator.joint_positions_deg()[0]
+        assert 5.0 < stopped < 85.0 and not emulator.is_moving()
+        achieved = math.degrees(response.result.achieved_joints[0])
+        assert achieved == pytest.approx(stopped, abs=0.5)

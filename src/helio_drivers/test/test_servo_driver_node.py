@@ -8,7 +8,7 @@ from helio_drivers import maestro_protocol as proto
 from helio_drivers.maestro_emulator import MaestroEmulator
 from helio_drivers.servo_driver_node import ServoDriverNode
 from helio_msgs.action import MoveWrist
-from node_harness import DriverGraph, wait_for
+from node_harness import DriverGraph, SimClock, wait_for
 import pytest
 
 # yaw reversed and offset, as a mounted servo may be; pitch on channel 3
@@ -48,19 +48,24 @@ def clock():
     return FreezableClock()
 
 
+def wrist_parameters(emulator):
+    """Return the driver parameters for the emulated wrist (fast, short timeouts)."""
+    return {'port': emulator.port_path, 'timeout_s': 0.1, 'retries': 1,
+            'joint_state_rate_hz': 50.0, 'status_period_s': 0.2,
+            'reconnect_initial_s': 0.05, 'reconnect_max_s': 0.2,
+            'position_tolerance_us': 0.25,
+            'yaw.channel': 0, 'yaw.min_pulse_us': 700.0, 'yaw.max_pulse_us': 2300.0,
+            'yaw.direction': -1, 'yaw.zero_offset_rad': 0.1,
+            'yaw.speed_us_per_s': 4000.0, 'yaw.acceleration_us_per_s2': 40000.0,
+            'pitch.channel': 3, 'pitch.speed_us_per_s': 1000.0,
+            'pitch.acceleration_us_per_s2': 40000.0}
+
+
 @pytest.fixture
 def wrist(clock):
     emulator = MaestroEmulator(calibrations=[YAW, PITCH], clock=clock)
-    parameters = {'port': emulator.port_path, 'timeout_s': 0.1, 'retries': 1,
-                  'joint_state_rate_hz': 50.0, 'status_period_s': 0.2,
-                  'reconnect_initial_s': 0.05, 'reconnect_max_s': 0.2,
-                  'position_tolerance_us': 0.25,
-                  'yaw.channel': 0, 'yaw.min_pulse_us': 700.0, 'yaw.max_pulse_us': 2300.0,
-                  'yaw.direction': -1, 'yaw.zero_offset_rad': 0.1,
-                  'yaw.speed_us_per_s': 4000.0, 'yaw.acceleration_us_per_s2': 40000.0,
-                  'pitch.channel': 3, 'pitch.speed_us_per_s': 1000.0,
-                  'pitch.acceleration_us_per_s2': 40000.0}
-    graph = DriverGraph(ServoDriverNode, MoveWrist, 'move_wrist', 'servo/status', parameters)
+    graph = DriverGraph(ServoDriverNode, MoveWrist, 'move_wrist', 'servo/status',
+                        wrist_parameters(emulator))
     try:
         yield emulator, graph
     finally:
@@ -137,3 +142,27 @@ def test_unplug_aborts_and_reconnects(wrist):
     emulator.reconnect()
     assert graph.wait_status(lambda s: s.connected)
     assert graph.run(MoveWrist.Goal(yaw=0.0, pitch=0.0)).result.success
+
+
+def test_a_stopped_sim_clock_cannot_hold_a_move_past_its_wall_clock_guard():
+    with MaestroEmulator(calibrations=[YAW, PITCH]) as emulator:
+        graph = DriverGraph(ServoDriverNode, MoveWrist, 'move_wrist', 'servo/status', {
+            **wrist_parameters(emulator), 'use_sim_time': True, 'move_timeout_s': 1.0,
+            'move_wall_timeout_s': 0.4})
+        clock = SimClock(graph.node, rate=0.0)        # /clock published, never advancing
+        try:
+            started = time.monotonic()
+            # pitch to 1.5 rad at 1000 us/s: 0.95 s of motion, longer than the 0.4 s guard
+            response = graph.run(MoveWrist.Goal(yaw=0.1, pitch=1.5))
+            wall = time.monotonic() - started
+            assert not response.result.success
+            assert 'within 0.40 s of wall time' in response.result.message
+            assert '/clock' in response.result.message
+            assert 0.4 < wall < 5.0
+            # held short of the target, where it was
+            held = PITCH.angle(emulator.target_pulse_widths_us()[3])
+            assert held < 1.4
+            assert response.result.achieved_pitch == pytest.approx(held, abs=0.05)
+        finally:
+            clock.stop()
+            graph.close()

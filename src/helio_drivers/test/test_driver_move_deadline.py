@@ -1,0 +1,40 @@
+"""MoveDeadline: move limits on the node clock (sim time) with a wall-clock guard."""
+
+from helio_drivers.node_support import MoveDeadline
+import pytest
+
+
+def test_a_slow_sim_clock_lets_a_move_run_longer_in_wall_time_than_its_limit():
+    deadline = MoveDeadline(1.0, 10.0, node_now_s=100.0, wall_now_s=5000.0)
+    # 3 s of wall time, but only 0.75 s of a quarter-speed simulated clock
+    assert deadline.exceeded(100.75, 5003.0) is None
+    why = deadline.exceeded(101.01, 5004.04)
+    assert why == 'move not finished within 1.00 s on the node clock'
+
+
+def test_a_fast_sim_clock_ends_a_move_early_in_wall_time():
+    deadline = MoveDeadline(60.0, 600.0, node_now_s=10.0, wall_now_s=0.0)
+    assert deadline.exceeded(70.5, 6.05) is not None      # 10x real time: 60 s after 6 s
+
+
+def test_a_stopped_clock_is_caught_by_the_wall_guard():
+    deadline = MoveDeadline(1.0, 2.0, node_now_s=100.0, wall_now_s=0.0)
+    assert deadline.exceeded(100.0, 1.9) is None
+    why = deadline.exceeded(100.0, 2.1)
+    assert 'within 2.00 s of wall time' in why and 'advanced only 0.00 s' in why
+    assert '/clock' in why
+
+
+def test_no_sim_time_yet_and_a_clock_going_back_re_anchor_instead_of_counting():
+    deadline = MoveDeadline(1.0, 100.0, node_now_s=0.0, wall_now_s=0.0)   # no /clock yet
+    assert deadline.exceeded(500.0, 0.1) is None       # the first /clock is not 500 s elapsed
+    assert deadline.exceeded(500.9, 0.2) is None
+    assert deadline.exceeded(3.0, 0.3) is None         # simulation restarted: re-anchored
+    assert deadline.exceeded(3.9, 0.4) is None
+    assert deadline.exceeded(4.1, 0.5) is not None
+
+
+@pytest.mark.parametrize('limits', [(0.0, 1.0), (1.0, 0.0), (-1.0, 1.0)])
+def test_limits_must_be_positive(limits):
+    with pytest.raises(ValueError, match='must be positive'):
+        MoveDeadline(*limits, node_now_s=0.0, wall_now_s=0.0)
