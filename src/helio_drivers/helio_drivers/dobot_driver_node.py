@@ -20,14 +20,12 @@ thread and the action plumbing are ``device_action_node.DeviceActionNode``'s.
 
 from helio_drivers import dobot_protocol as proto
 from helio_drivers.device_action_node import (
-    DeviceActionNode, DeviceSpec, GoalRefused, MoveProgress)
+    DeviceActionNode, DeviceSpec, GoalRefused, MoveProgress, run_node)
 from helio_drivers.dobot_client import (
     check_target, DobotClient, LIMIT_ALARMS, pose_to_si)
 from helio_msgs.action import MoveArm
 from helio_optics.arm_kinematics import UnreachableError
 from helio_optics.node_parameters import declare
-import rclpy
-from rclpy.executors import ExternalShutdownException
 
 MODES = {MoveArm.Goal.MOVJ_XYZ: 'MOVJ_XYZ', MoveArm.Goal.MOVL_XYZ: 'MOVL_XYZ',
          MoveArm.Goal.MOVJ_ANGLE: 'MOVJ_ANGLE'}
@@ -149,17 +147,7 @@ class DobotDriverNode(DeviceActionNode):
 
 def main(args=None):
     """Run the node until shutdown."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = DobotDriverNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(DobotDriverNode, args)
 
 
 if __name__ == '__main__':

@@ -18,12 +18,10 @@ action plumbing are ``device_action_node.DeviceActionNode``'s.
 
 from helio_drivers import maestro_protocol as proto
 from helio_drivers.device_action_node import (
-    DeviceActionNode, DeviceSpec, GoalRefused, MoveProgress)
+    DeviceActionNode, DeviceSpec, GoalRefused, MoveProgress, run_node)
 from helio_drivers.maestro_client import MaestroClient
 from helio_msgs.action import MoveWrist
 from helio_optics.node_parameters import declare
-import rclpy
-from rclpy.executors import ExternalShutdownException
 
 AXES = ('yaw', 'pitch')
 
@@ -150,17 +148,7 @@ class ServoDriverNode(DeviceActionNode):
 
 def main(args=None):
     """Run the node until shutdown."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ServoDriverNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(ServoDriverNode, args)
 
 
 if __name__ == '__main__':

@@ -1,5 +1,6 @@
 """In-process harness for the driver nodes: private context, client node, executor thread."""
 
+import contextlib
 import threading
 import time
 
@@ -19,6 +20,19 @@ def wait_for(future, timeout=10.0):
     future.add_done_callback(lambda _: done.set())
     assert done.wait(timeout), 'future not done in time'
     return future.result()
+
+
+@contextlib.contextmanager
+def driver_on(emulator, make_graph):
+    """Yield (emulator, make_graph(emulator)); close the graph, then the emulator."""
+    try:
+        graph = make_graph(emulator)
+        try:
+            yield emulator, graph
+        finally:
+            graph.close()
+    finally:
+        emulator.close()
 
 
 class DriverGraph:
@@ -76,6 +90,36 @@ class DriverGraph:
     def run(self, goal, feedback=None):
         """Send a goal and return its GetResult response."""
         return wait_for(self.send(goal, feedback).get_result_async())
+
+    def timed_run(self, goal):
+        """Run a goal; return its GetResult response and the seconds it took."""
+        started = time.monotonic()
+        response = wait_for(DriverGraph.send(self, goal).get_result_async())
+        return response, time.monotonic() - started
+
+    def unplug_mid_move(self, emulator, goal, moving):
+        """
+        Send `goal`, unplug `emulator` once a feedback satisfies `moving(feedback)`.
+
+        Return the goal's GetResult response and the seconds from the unplug to the result.
+        """
+        started = threading.Event()
+
+        def on_feedback(message):
+            if moving(message.feedback):
+                started.set()
+        result = DriverGraph.send(self, goal, on_feedback).get_result_async()
+        assert started.wait(5.0), 'the move did not start'
+        unplugged_at = time.monotonic()
+        emulator.disconnect()
+        response = wait_for(result)
+        return response, time.monotonic() - unplugged_at
+
+    def replug(self, emulator):
+        """Plug the emulator back in; return whether the driver reports the link again."""
+        self.statuses.clear()
+        emulator.reconnect()
+        return self.wait_status(lambda s: s.connected)
 
     def close(self):
         """Shut everything down (the driver leaves its device stopped)."""

@@ -9,7 +9,7 @@ from helio_drivers.dobot_driver_node import DobotDriverNode
 from helio_drivers.dobot_emulator import DobotEmulator
 from helio_msgs.action import MoveArm
 from helio_optics.arm_kinematics import DobotArm
-from node_harness import DriverGraph, SimClock, wait_for
+from node_harness import driver_on, DriverGraph, SimClock, wait_for
 import pytest
 
 
@@ -32,15 +32,15 @@ class Graph(DriverGraph):
         return wait_for(self.send(mode, target).get_result_async())
 
 
+# j1 0 -> 85 deg at 60 deg/s and 400 deg/s^2: a trapezoid of 85/60 + 60/400 = 1.57 s.
+LONG_MOVE = (math.radians(85.0), 0.2, 0.2, 0.0)
+SLOW_SIM = 0.25          # the simulated clock runs at a quarter of real time
+
+
 @pytest.fixture
 def graph():
-    emulator = DobotEmulator()
-    graph = Graph(emulator)
-    try:
-        yield emulator, graph
-    finally:
-        graph.close()
-        emulator.close()
+    with driver_on(DobotEmulator(), Graph) as emulator_and_graph:
+        yield emulator_and_graph
 
 
 def test_moves_succeed_with_feedback_and_joint_states(graph):
@@ -102,44 +102,32 @@ def test_cancel_mid_move_stops_the_arm_and_clears_the_queue(graph):
 
 def test_unplug_mid_move_aborts_within_half_a_second_then_reconnects(graph):
     emulator, graph = graph
-    on_feedback, moving = passed_j1(5.0)
-    handle = graph.send(MoveArm.Goal.MOVJ_ANGLE, (math.radians(85.0), 0.2, 0.2, 0.0),
-                        feedback=on_feedback)
-    result_future = handle.get_result_async()
-    assert moving.wait(5.0)
-    unplugged_at = time.monotonic()
-    emulator.disconnect()
-    response = wait_for(result_future)
-    assert time.monotonic() - unplugged_at < 0.5
+    response, seconds = graph.unplug_mid_move(
+        emulator, MoveArm.Goal(mode=MoveArm.Goal.MOVJ_ANGLE, target=LONG_MOVE),
+        lambda feedback: feedback.current_joints[0] >= math.radians(5.0))
+    assert seconds < 0.5
     assert not response.result.success and 'link lost' in response.result.message
     assert graph.wait_status(lambda s: not s.connected)
     # goals fail fast while the port is gone
-    started = time.monotonic()
-    response = graph.move(MoveArm.Goal.MOVJ_ANGLE, (0.0, 0.2, 0.2, 0.0))
+    home = MoveArm.Goal(mode=MoveArm.Goal.MOVJ_ANGLE, target=[0.0, 0.2, 0.2, 0.0])
+    response, seconds = graph.timed_run(home)
     assert not response.result.success and 'not connected' in response.result.message
-    assert time.monotonic() - started < 0.5
-    graph.statuses.clear()
-    emulator.reconnect()
-    assert graph.wait_status(lambda s: s.connected)
-    assert graph.move(MoveArm.Goal.MOVJ_ANGLE, (0.0, 0.2, 0.2, 0.0)).result.success
-
-
-# j1 0 -> 85 deg at 60 deg/s and 400 deg/s^2: a trapezoid of 85/60 + 60/400 = 1.57 s.
-LONG_MOVE = (math.radians(85.0), 0.2, 0.2, 0.0)
-SLOW_SIM = 0.25          # the simulated clock runs at a quarter of real time
+    assert seconds < 0.5
+    assert graph.replug(emulator)
+    assert graph.move(home.mode, home.target).result.success
 
 
 @contextlib.contextmanager
 def sim_time_graph(move_timeout_s):
     """Run dobot_driver with use_sim_time, move_timeout_s [sim s], /clock at SLOW_SIM."""
-    with DobotEmulator() as emulator:
-        graph = Graph(emulator, use_sim_time=True, move_timeout_s=move_timeout_s)
+    def make_graph(emulator):
+        return Graph(emulator, use_sim_time=True, move_timeout_s=move_timeout_s)
+    with driver_on(DobotEmulator(), make_graph) as (emulator, graph):
         clock = SimClock(graph.node, SLOW_SIM)
         try:
             yield emulator, graph
         finally:
             clock.stop()
-            graph.close()
 
 
 def test_under_a_slow_sim_clock_a_move_longer_in_wall_time_than_its_timeout_succeeds():

@@ -8,7 +8,7 @@ from helio_drivers import maestro_protocol as proto
 from helio_drivers.maestro_emulator import MaestroEmulator
 from helio_drivers.servo_driver_node import ServoDriverNode
 from helio_msgs.action import MoveWrist
-from node_harness import DriverGraph, SimClock, wait_for
+from node_harness import driver_on, DriverGraph, SimClock, wait_for
 import pytest
 
 # yaw reversed and offset, as a mounted servo may be; pitch on channel 3
@@ -61,16 +61,19 @@ def wrist_parameters(emulator):
             'pitch.acceleration_us_per_s2': 40000.0}
 
 
+def wrist_graph(**overrides):
+    """Return a function starting servo_driver on an emulator, with parameter overrides."""
+    def make_graph(emulator):
+        return DriverGraph(ServoDriverNode, MoveWrist, 'move_wrist', 'servo/status',
+                           {**wrist_parameters(emulator), **overrides})
+    return make_graph
+
+
 @pytest.fixture
 def wrist(clock):
     emulator = MaestroEmulator(calibrations=[YAW, PITCH], clock=clock)
-    graph = DriverGraph(ServoDriverNode, MoveWrist, 'move_wrist', 'servo/status',
-                        wrist_parameters(emulator))
-    try:
-        yield emulator, graph
-    finally:
-        graph.close()
-        emulator.close()
+    with driver_on(emulator, wrist_graph()) as emulator_and_graph:
+        yield emulator_and_graph
 
 
 def test_wrist_moves_to_calibrated_angles(wrist):
@@ -123,32 +126,23 @@ def test_cancel_holds_the_servos_mid_move(wrist, clock):
 
 def test_unplug_aborts_and_reconnects(wrist):
     emulator, graph = wrist
-    started = threading.Event()
-
-    def on_feedback(message):
-        if message.feedback.current_pitch > 0.1:
-            started.set()
-    handle = graph.send(MoveWrist.Goal(yaw=0.1, pitch=1.5), feedback=on_feedback)
-    result = handle.get_result_async()
-    assert started.wait(5.0)
-    unplugged_at = time.monotonic()
-    emulator.disconnect()
-    response = wait_for(result)
-    assert time.monotonic() - unplugged_at < 0.5
+    response, seconds = graph.unplug_mid_move(
+        emulator, MoveWrist.Goal(yaw=0.1, pitch=1.5),
+        lambda feedback: feedback.current_pitch > 0.1)
+    assert seconds < 0.5
     assert not response.result.success and 'link lost' in response.result.message
-    response = graph.run(MoveWrist.Goal(yaw=0.0, pitch=0.0))
+    assert graph.wait_status(lambda s: not s.connected)
+    # goals fail fast while the port is gone
+    response, seconds = graph.timed_run(MoveWrist.Goal(yaw=0.0, pitch=0.0))
     assert not response.result.success and 'not connected' in response.result.message
-    graph.statuses.clear()
-    emulator.reconnect()
-    assert graph.wait_status(lambda s: s.connected)
+    assert seconds < 0.5
+    assert graph.replug(emulator)
     assert graph.run(MoveWrist.Goal(yaw=0.0, pitch=0.0)).result.success
 
 
 def test_a_stopped_sim_clock_cannot_hold_a_move_past_its_wall_clock_guard():
-    with MaestroEmulator(calibrations=[YAW, PITCH]) as emulator:
-        graph = DriverGraph(ServoDriverNode, MoveWrist, 'move_wrist', 'servo/status', {
-            **wrist_parameters(emulator), 'use_sim_time': True, 'move_timeout_s': 1.0,
-            'move_wall_timeout_s': 0.4})
+    make_graph = wrist_graph(use_sim_time=True, move_timeout_s=1.0, move_wall_timeout_s=0.4)
+    with driver_on(MaestroEmulator(calibrations=[YAW, PITCH]), make_graph) as (emulator, graph):
         clock = SimClock(graph.node, rate=0.0)        # /clock published, never advancing
         try:
             started = time.monotonic()
@@ -165,4 +159,3 @@ def test_a_stopped_sim_clock_cannot_hold_a_move_past_its_wall_clock_guard():
             assert response.result.achieved_pitch == pytest.approx(held, abs=0.05)
         finally:
             clock.stop()
-            graph.close()
