@@ -231,35 +231,56 @@ class DeviceActionNode(Node):
     # ---- device thread ----------------------------------------------------------------------
 
     def _device_loop(self):
-        next_joints = next_status = time.monotonic()
+        schedule = {'joints': time.monotonic(), 'status': time.monotonic()}
         while not self._stopping.is_set():
             self._wake.clear()           # before looking: a wake from now on is not lost
-            now = time.monotonic()
-            if not self.client.connected and self.backoff.due(now):
-                self._connect()
-            run = self._run
-            if run is not None:
-                self._step_goal(run)
-            if self.client.connected and now >= next_joints:
-                next_joints = now + self.joint_period
-                try:
-                    self._publish_joints()
-                except DeviceError as error:     # unplugged, or no answer after every retry
-                    self._link_lost(error)
-            if now >= next_status:
-                next_status = now + self.status_period
-                if self.client.connected:
-                    try:
-                        self._alarms = self.read_alarms()
-                    except DeviceError as error:
-                        self._link_lost(error)
-                self._publish_status()
-            wake_at = min(next_joints, next_status)
+            try:
+                self._device_cycle(schedule)
+            except Exception as error:   # a bug must not end the thread and strand a goal
+                self._driver_error(error)
+            wake_at = min(schedule.values())
             if not self.client.connected:
                 wake_at = min(wake_at, self.backoff.next_attempt_at)
             if self._run is not None:
-                wake_at = min(wake_at, now + self.poll_period)
+                wake_at = min(wake_at, time.monotonic() + self.poll_period)
             self._wake.wait(max(0.0, wake_at - time.monotonic()))
+
+    def _driver_error(self, error):
+        """Log an unexpected error; stop and abort the goal it hit (best effort)."""
+        self.get_logger().error(f'{self.spec.device} device thread: {type(error).__name__}: '
+                                f'{error}', throttle_duration_sec=5.0)
+        run = self._run
+        if run is None:
+            return
+        if run.move is not None and self.client.connected:
+            try:
+                self.stop_move(run.move)
+            except Exception:            # best effort: the goal is aborted either way
+                pass
+        self._answer(run, 'abort', f'driver error, move aborted: {error}')
+
+    def _device_cycle(self, schedule):
+        """Reconnect when due, advance the goal, poll joints and status when due."""
+        now = time.monotonic()
+        if not self.client.connected and self.backoff.due(now):
+            self._connect()
+        run = self._run
+        if run is not None:
+            self._step_goal(run)
+        if self.client.connected and now >= schedule['joints']:
+            schedule['joints'] = now + self.joint_period
+            try:
+                self._publish_joints()
+            except DeviceError as error:     # unplugged, or no answer after every retry
+                self._link_lost(error)
+        if now >= schedule['status']:
+            schedule['status'] = now + self.status_period
+            if self.client.connected:
+                try:
+                    self._alarms = self.read_alarms()
+                except DeviceError as error:
+                    self._link_lost(error)
+            self._publish_status()
 
     def _node_now_s(self):
         return self.get_clock().now().nanoseconds * 1e-9

@@ -159,3 +159,23 @@ def test_a_stopped_sim_clock_cannot_hold_a_move_past_its_wall_clock_guard():
             assert response.result.achieved_pitch == pytest.approx(held, abs=0.05)
         finally:
             clock.stop()
+
+
+def test_an_unexpected_error_aborts_the_goal_holds_the_servos_and_the_driver_goes_on(wrist):
+    emulator, graph = wrist
+    poll_move = graph.driver.poll_move
+    calls = []
+
+    def failing_once(move):
+        calls.append(move)
+        if len(calls) == 3:
+            raise RuntimeError('injected bug')
+        return poll_move(move)
+    graph.driver.poll_move = failing_once
+    response = graph.run(MoveWrist.Goal(yaw=0.1, pitch=1.5))
+    assert not response.result.success
+    assert response.result.message == 'driver error, move aborted: injected bug'
+    held = PITCH.angle(emulator.target_pulse_widths_us()[3])
+    assert held < 1.4                       # held where it was, not left moving to 1.5
+    response = graph.run(MoveWrist.Goal(yaw=0.0, pitch=0.2))
+    assert response.result.success, response.result.message
