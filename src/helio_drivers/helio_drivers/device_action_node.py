@@ -79,7 +79,7 @@ class _GoalRun:
 
     def __init__(self, handle):
         self.handle = handle
-        self.answer = Future()       # (outcome, Result, log message), set by the device thread
+        self.answer = Future()       # (outcome, Result), set by the device thread
         self.move = None             # the subclass's state of the started move
         self.deadline = None
 
