@@ -110,7 +110,7 @@ def bench_node_moves():
     """Time MoveArm goal -> result through dobot_driver (real rclpy) vs the planned motion."""
     import rclpy
     from rclpy.action import ActionClient
-    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
     from helio_drivers.dobot_driver_node import DobotDriverNode
     from helio_msgs.action import MoveArm
@@ -125,7 +125,7 @@ def bench_node_moves():
             Parameter('joint_acceleration_dps2', value=[800.0] * 4)])
         node = rclpy.create_node('dobot_bench_client', context=context)
         client = ActionClient(node, MoveArm, 'move_arm')
-        executor = MultiThreadedExecutor(num_threads=4, context=context)
+        executor = SingleThreadedExecutor(context=context)  # as rclpy.spin runs the node
         executor.add_node(driver)
         executor.add_node(node)
         spinner = threading.Thread(target=executor.spin, daemon=True)
