@@ -11,8 +11,9 @@ it the far field is used; the energy this moves is booked as ``regrid``). Far fr
 the panel is a 1-D column (same layers) under the unconcentrated sunlight.
 
 Time stepping is the Douglas alternating-direction implicit scheme for backward Euler: per
-step one tridiagonal solve along each axis (LAPACK gtsv on all lines at once), so a step costs
-O(cells) and is unconditionally stable; its fixed point is the exact discrete steady state.
+step one tridiagonal solve along each axis (laterally a product with the cached dense inverse
+for all lines at once, in depth the Thomas algorithm per column), unconditionally stable; its
+fixed point is the exact discrete steady state.
 Losses at the surface: convection h (T - T_a) and radiation eps sigma (T^4 - T_a^4), the
 linear part implicit, the rest of the radiation explicit; at the back, convection through the
 half bottom layer. Lateral patch sides are adiabatic (the far field has no lateral gradient).
@@ -39,7 +40,6 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
-from scipy.linalg import solve_banded
 
 STEFAN_BOLTZMANN = 5.670374419e-8  # [W/(m^2 K^4)]
 GAS_CONSTANT = 8.314462618         # [J/(mol K)]
@@ -207,16 +207,18 @@ def _apply_tridiagonal(lower, diagonal, upper, values):
     return result
 
 
-def _solve_shifted(lower, diagonal, upper, dt, rhs):
-    """Solve (I - dt A) x = rhs along axis 0 of rhs, for all other indices at once."""
+def _shifted_inverse(lower, diagonal, upper, dt):
+    """
+    Dense inverse of (I - dt A) for a lateral axis operator A (n of about 100).
+
+    The patch's lateral operators and the world's step are fixed, so the inverse is computed
+    once per dt and a sweep is one matrix product over all lines (BLAS), about five times
+    faster than a banded solve of the same lines.
+    """
     n = len(diagonal)
-    banded = np.zeros((3, n))
-    banded[0, 1:] = -dt * upper[:-1]
-    banded[1] = 1.0 - dt * diagonal
-    banded[2, :-1] = -dt * lower[1:]
-    flat = rhs.reshape(n, -1)
-    return solve_banded((1, 1), banded, flat, overwrite_b=False,
-                        check_finite=False).reshape(rhs.shape)
+    shifted = np.eye(n) - dt * (np.diag(diagonal) + np.diag(upper[:-1], 1)
+                                + np.diag(lower[1:], -1))
+    return np.linalg.inv(shifted)
 
 
 def bilinear_weights(centres, coordinates):
@@ -298,6 +300,8 @@ class WoodPanel:
         # (world y) and into the depth the wood conducts with `conductivity`.
         self._ops_x = _tridiagonal_operator(self._lateral, self.wood.diffusivity_along_grain)
         self._ops_y = _tridiagonal_operator(self._lateral, a)
+        self._inverse_dt = None
+        self._inverses = None
         lower, diagonal, upper = _tridiagonal_operator(self.z_edges, a)
         rho_c = self.wood.volumetric_heat_capacity
         half_bottom = 0.5 * self.z_widths[-1]
@@ -524,6 +528,14 @@ class WoodPanel:
         self.ledger.regrid += self.stored_energy() - before
         self.recentres += 1
 
+    def _lateral_inverses(self, dt):
+        """Return the inverses of (I - dt Ax) and (I - dt Ay), cached for the last dt."""
+        if self._inverse_dt != dt:
+            self._inverses = (_shifted_inverse(*self._ops_x, dt),
+                              _shifted_inverse(*self._ops_y, dt))
+            self._inverse_dt = dt
+        return self._inverses
+
     def step(self, dt, irradiance, far_irradiance=0.0):
         """
         Advance by `dt` [s] under solar `irradiance` on each patch column (y, x) [W/m^2].
@@ -552,11 +564,10 @@ class WoodPanel:
         az = self._apply_z(theta, h_top)
         rhs = theta + dt * (ay + az)
         rhs[0] += dt * source_top
-        # x sweep: the x axis first
-        u1 = np.moveaxis(_solve_shifted(*self._ops_x, dt,
-                                        np.ascontiguousarray(np.moveaxis(rhs, 2, 0))), 0, 2)
-        u2 = np.moveaxis(_solve_shifted(*self._ops_y, dt, np.ascontiguousarray(
-            np.moveaxis(u1 - dt * ay, 1, 0))), 0, 1)
+        # x sweep first, then y: one product with the cached inverse along each axis
+        inverse_x, inverse_y = self._lateral_inverses(dt)
+        u1 = np.einsum('ij,zyj->zyi', inverse_x, rhs, optimize=True)
+        u2 = np.einsum('ij,zjx->zix', inverse_y, u1 - dt * ay, optimize=True)
         u3 = self._solve_z(dt, u2 - dt * az, h_top)
 
         areas = self.cell_areas
