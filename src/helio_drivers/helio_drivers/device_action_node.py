@@ -36,9 +36,7 @@ from helio_drivers.node_support import device_status, MoveDeadline
 from helio_drivers.serial_link import DeviceError, LinkError, ReconnectBackoff
 from helio_msgs.msg import DeviceStatus
 from helio_optics.node_parameters import declare
-import rclpy
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
@@ -386,18 +384,3 @@ class DeviceActionNode(Node):
         self.client.close()
         self.action_server.destroy()
         return super().destroy_node()
-
-
-def run_node(node_class, args=None):
-    """Run a driver node in rclpy.spin until shutdown, then destroy it (the nodes' main)."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = node_class()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()

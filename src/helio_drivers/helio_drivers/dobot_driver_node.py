@@ -20,12 +20,13 @@ thread and the action plumbing are ``device_action_node.DeviceActionNode``'s.
 
 from helio_drivers import dobot_protocol as proto
 from helio_drivers.device_action_node import (
-    DeviceActionNode, DeviceSpec, GoalRefused, MoveProgress, run_node)
+    DeviceActionNode, DeviceSpec, GoalRefused, MoveProgress)
 from helio_drivers.dobot_client import (
     check_target, DobotClient, LIMIT_ALARMS, pose_to_si)
 from helio_msgs.action import MoveArm
 from helio_optics.arm_kinematics import UnreachableError
 from helio_optics.node_parameters import declare
+from helio_optics.node_runner import run_node
 
 MODES = {MoveArm.Goal.MOVJ_XYZ: 'MOVJ_XYZ', MoveArm.Goal.MOVL_XYZ: 'MOVL_XYZ',
          MoveArm.Goal.MOVJ_ANGLE: 'MOVJ_ANGLE'}

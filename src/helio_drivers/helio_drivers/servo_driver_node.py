@@ -18,10 +18,11 @@ action plumbing are ``device_action_node.DeviceActionNode``'s.
 
 from helio_drivers import maestro_protocol as proto
 from helio_drivers.device_action_node import (
-    DeviceActionNode, DeviceSpec, GoalRefused, MoveProgress, run_node)
+    DeviceActionNode, DeviceSpec, GoalRefused, MoveProgress)
 from helio_drivers.maestro_client import MaestroClient
 from helio_msgs.action import MoveWrist
 from helio_optics.node_parameters import declare
+from helio_optics.node_runner import run_node
 
 AXES = ('yaw', 'pitch')
 

@@ -24,12 +24,12 @@ from helio_drivers.sim_clock import Pacer
 from helio_drivers.sim_devices import DeviceSettings, SimDevices
 from helio_drivers.sim_world import flat_settings, settings_from_flat, SimSettings, SimWorld
 from helio_optics.node_parameters import declare
+from helio_optics.node_runner import run_node
 from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
 from helio_optics.rig_kinematics import RigParameters
 from helio_perception.image_conversion import numpy_to_image
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
@@ -284,17 +284,7 @@ class SimWorldNode(Node):
 
 def main(args=None):
     """Run the sim_world node."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = SimWorldNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(SimWorldNode, args)
 
 
 if __name__ == '__main__':

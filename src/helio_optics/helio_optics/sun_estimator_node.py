@@ -19,11 +19,10 @@ from helio_optics.ephemeris import corrected_angles, Site, sun_position
 from helio_optics.geometry import direction_from_angles, transform_points
 from helio_optics.lens import LensParameters
 from helio_optics.node_parameters import declare
+from helio_optics.node_runner import run_node
 from helio_optics.rig_kinematics import default_rig_file, JOINT_NAMES, load_rig_parameters, Rig
 from helio_optics.sun_estimation import METHODS, Observation, SunEstimator
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
@@ -279,17 +278,7 @@ class SunEstimatorNode(Node):
 
 def main(args=None):
     """Run the sun_estimator node."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = SunEstimatorNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(SunEstimatorNode, args)
 
 
 if __name__ == '__main__':

@@ -23,6 +23,7 @@ from helio_msgs.msg import SpotObservation
 from helio_optics.geometry import quaternion_from_matrix
 from helio_optics.lens import LensParameters
 from helio_optics.node_parameters import declare
+from helio_optics.node_runner import run_node
 from helio_perception.frame_statistics import FrameStatistics
 from helio_perception.ground_plane import camera_from_info, MarkerConfig
 from helio_perception.image_conversion import image_to_numpy, ImageConversionError
@@ -30,8 +31,6 @@ from helio_perception.node_support import (
     diagnostics, JointCache, load_rig, stamp_seconds)
 from helio_perception.spot_detection import SpotConfig, THRESHOLD_MODES
 from helio_perception.spot_observer import optics_from_world, SpotObserver
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -257,17 +256,7 @@ def to_message(observation, stamp):
 
 def main(args=None):
     """Run the spot_detector node."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = SpotDetectorNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(SpotDetectorNode, args)
 
 
 if __name__ == '__main__':

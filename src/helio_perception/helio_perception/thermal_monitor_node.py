@@ -19,6 +19,7 @@ from geometry_msgs.msg import Point
 from helio_msgs.msg import ThermalStats
 from helio_optics.geometry import invert_transform
 from helio_optics.node_parameters import declare
+from helio_optics.node_runner import run_node
 from helio_perception.frame_statistics import FrameStatistics
 from helio_perception.ground_plane import camera_from_info, GroundMapping
 from helio_perception.image_conversion import image_to_numpy, ImageConversionError
@@ -26,8 +27,6 @@ from helio_perception.node_support import (
     diagnostics, JointCache, load_rig, stamp_seconds)
 from helio_perception.thermal import ThermalAnalyzer, ThermalConfig
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -139,17 +138,7 @@ class ThermalMonitorNode(Node):
 
 def main(args=None):
     """Run the thermal_monitor node."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ThermalMonitorNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(ThermalMonitorNode, args)
 
 
 if __name__ == '__main__':

@@ -1,0 +1,25 @@
+"""The main() of every helio node: spin one node until shutdown, then clean up."""
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+
+
+def run_node(node_class, args=None):
+    """
+    Run `node_class()` in rclpy.spin until Ctrl-C or an external shutdown, then destroy it.
+
+    The pattern of the ros2/examples nodes, written once: a node that fails in its constructor
+    (a bad parameter) raises after rclpy is shut down again, so the process exits non-zero
+    with the node's message.
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = node_class()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
