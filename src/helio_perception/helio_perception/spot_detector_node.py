@@ -29,6 +29,7 @@ from helio_perception.ground_plane import camera_from_info, MarkerConfig
 from helio_perception.image_conversion import image_to_numpy, ImageConversionError
 from helio_perception.node_support import (
     diagnostics, JointCache, load_rig, stamp_seconds)
+from helio_perception.process_tuning import frozen_after_start_up, keep_large_buffers
 from helio_perception.spot_detection import SpotConfig, THRESHOLD_MODES
 from helio_perception.spot_observer import optics_from_world, SpotObserver
 from rclpy.node import Node
@@ -255,8 +256,9 @@ def to_message(observation, stamp):
 
 
 def main(args=None):
-    """Run the spot_detector node."""
-    run_node(SpotDetectorNode, args)
+    """Run the spot_detector node (freed frame buffers reused, start-up objects frozen)."""
+    keep_large_buffers()
+    run_node(frozen_after_start_up(SpotDetectorNode), args)
 
 
 if __name__ == '__main__':

@@ -25,6 +25,7 @@ from helio_perception.ground_plane import camera_from_info, GroundMapping
 from helio_perception.image_conversion import image_to_numpy, ImageConversionError
 from helio_perception.node_support import (
     diagnostics, JointCache, load_rig, stamp_seconds)
+from helio_perception.process_tuning import frozen_after_start_up
 from helio_perception.thermal import ThermalAnalyzer, ThermalConfig
 import numpy as np
 from rclpy.node import Node
@@ -137,8 +138,8 @@ class ThermalMonitorNode(Node):
 
 
 def main(args=None):
-    """Run the thermal_monitor node."""
-    run_node(ThermalMonitorNode, args)
+    """Run the thermal_monitor node (start-up objects frozen)."""
+    run_node(frozen_after_start_up(ThermalMonitorNode), args)
 
 
 if __name__ == '__main__':
