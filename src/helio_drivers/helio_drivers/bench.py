@@ -23,7 +23,7 @@ from helio_drivers.dobot_client import DobotClient
 from helio_drivers.dobot_emulator import DobotEmulator
 from helio_drivers.maestro_client import MaestroClient
 from helio_drivers.maestro_emulator import MaestroEmulator
-from helio_optics.bench_report import add_json_option, report
+from helio_optics.bench_report import add_json_option, call_durations, report
 import numpy as np
 
 MOVES = [(0.0, 20.0, 20.0, 0.0), (30.0, 30.0, 10.0, 0.0), (-20.0, 15.0, 35.0, 10.0),
@@ -35,24 +35,14 @@ def percentile_ms(samples, q):
     return float(np.percentile(np.array(samples) * 1000.0, q))
 
 
-def time_calls(call, count):
-    """Return the durations [s] of `count` calls."""
-    durations = []
-    for _ in range(count):
-        started = time.perf_counter()
-        call()
-        durations.append(time.perf_counter() - started)
-    return durations
-
-
 def bench_round_trips(samples, poll_seconds=2.0):
     """Round-trip latency of one command on each device, and the pose polling rate."""
     figures = {}
     with DobotEmulator() as emulator:
         client = DobotClient(emulator.port_path, timeout=0.5, retries=0)
         client.connect()
-        time_calls(client.get_pose, 20)        # warm up
-        durations = time_calls(client.get_pose, samples)
+        call_durations(client.get_pose, 20)        # warm up
+        durations = call_durations(client.get_pose, samples)
         figures['dobot_roundtrip_ms_median'] = percentile_ms(durations, 50)
         figures['dobot_roundtrip_ms_p99'] = percentile_ms(durations, 99)
         count, started = 0, time.perf_counter()
@@ -65,7 +55,7 @@ def bench_round_trips(samples, poll_seconds=2.0):
     with DobotEmulator(line_baudrate=115200) as emulator:
         client = DobotClient(emulator.port_path, timeout=0.5, retries=0)
         client.connect()
-        durations = time_calls(client.get_pose, max(100, samples // 10))
+        durations = call_durations(client.get_pose, max(100, samples // 10))
         figures['dobot_roundtrip_115200baud_ms_median'] = percentile_ms(durations, 50)
         figures['dobot_roundtrip_115200baud_ms_p99'] = percentile_ms(durations, 99)
         count, started = 0, time.perf_counter()
@@ -77,8 +67,8 @@ def bench_round_trips(samples, poll_seconds=2.0):
     with MaestroEmulator() as emulator:
         client = MaestroClient(emulator.port_path, timeout=0.5, retries=0)
         client.connect()
-        time_calls(lambda: client.get_position(0), 20)
-        durations = time_calls(lambda: client.get_position(0), samples)
+        call_durations(lambda: client.get_position(0), 20)
+        durations = call_durations(lambda: client.get_position(0), samples)
         figures['maestro_roundtrip_ms_median'] = percentile_ms(durations, 50)
         figures['maestro_roundtrip_ms_p99'] = percentile_ms(durations, 99)
         client.close()

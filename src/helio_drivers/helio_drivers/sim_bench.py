@@ -21,25 +21,15 @@ Target (issue 6): at least 10x real time on the 2-core machine.
 
 import argparse
 import os
-import statistics
 import tempfile
 import time
 
 from helio_drivers.sim_calibration import aim
 from helio_drivers.sim_flux import irradiance_on_cells, lens_pose_in_world
 from helio_drivers.sim_world import SimSettings, SimWorld
-from helio_optics.bench_report import add_json_option, report
+from helio_optics.bench_report import add_json_option, median_call_ms, report
 from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
 from helio_optics.rig_kinematics import RigParameters
-
-
-def _median_ms(function, repeats):
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - start)
-    return 1e3 * statistics.median(times)
 
 
 def _rig():
@@ -54,7 +44,7 @@ def bench_costs(rig, repeats=30):
     world.run(2.0)
     figures = {}
     irradiance = world._dni * world._unit_irradiance
-    figures['sim_heat_step_ms_median'] = _median_ms(
+    figures['sim_heat_step_ms_median'] = median_call_ms(
         lambda: world.panel.step(world.settings.step_s, irradiance, 900.0), repeats)
     s0 = world.sun_ray_world()
     poses = [lens_pose_in_world(world.T_robot_world,
@@ -62,15 +52,15 @@ def bench_costs(rig, repeats=30):
                                                       0.082)).T_robot_lens)
              for k in range(repeats)]
     fields = []
-    figures['sim_flux_trace_ms_median'] = _median_ms(
+    figures['sim_flux_trace_ms_median'] = median_call_ms(
         lambda: fields.append(world.flux.field(poses[len(fields)], s0)), repeats)
-    figures['sim_flux_bin_ms_median'] = _median_ms(
+    figures['sim_flux_bin_ms_median'] = median_call_ms(
         lambda: irradiance_on_cells(fields[-1], world.panel.x_edges, world.panel.y_edges,
                                     900.0), repeats)
-    figures['sim_thermal_frame_ms_median'] = _median_ms(world.thermal_image, repeats)
-    figures['sim_rgb_frame_ms_median'] = _median_ms(world.rgb_image, repeats)
+    figures['sim_thermal_frame_ms_median'] = median_call_ms(world.thermal_image, repeats)
+    figures['sim_rgb_frame_ms_median'] = median_call_ms(world.rgb_image, repeats)
     world.set_joints(aim(world, (0.07, 0.07, 0.0), 0.082))
-    figures['sim_world_step_ms_median'] = _median_ms(world.step, 4 * repeats)
+    figures['sim_world_step_ms_median'] = median_call_ms(world.step, 4 * repeats)
     return figures
 
 

@@ -1,5 +1,5 @@
 """
-The common tail of every helio benchmark: ``--json PATH``, a printed table, a flat JSON file.
+What every helio benchmark shares: timing calls, ``--json PATH``, a printed table, flat JSON.
 
     parser = argparse.ArgumentParser(...)
     add_json_option(parser)
@@ -16,7 +16,24 @@ import json
 import math
 import numbers
 import os
+import statistics
 import sys
+import time
+
+
+def call_durations(call, count):
+    """Return the wall-clock durations [s] of `count` successive calls of `call()`."""
+    durations = []
+    for _ in range(count):
+        started = time.perf_counter()
+        call()
+        durations.append(time.perf_counter() - started)
+    return durations
+
+
+def median_call_ms(call, count):
+    """Return the median wall-clock duration of `count` calls of `call()` [ms]."""
+    return 1e3 * statistics.median(call_durations(call, count))
 
 
 def add_json_option(parser):

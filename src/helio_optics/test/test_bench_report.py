@@ -3,8 +3,10 @@
 import argparse
 import json
 import math
+import time
 
-from helio_optics.bench_report import add_json_option, report, write_figures
+from helio_optics.bench_report import add_json_option, call_durations, median_call_ms
+from helio_optics.bench_report import report, write_figures
 import numpy as np
 import pytest
 
@@ -86,3 +88,27 @@ def test_json_option_takes_a_path_and_defaults_to_none():
     add_json_option(parser)
     assert parser.parse_args([]).json is None
     assert parser.parse_args(['--json', '/tmp/b.json']).json == '/tmp/b.json'
+
+
+def busy_for(seconds):
+    """Return a call that spins on the clock for at least `seconds`, counting its calls."""
+    calls = []
+
+    def call():
+        calls.append(None)
+        end = time.perf_counter() + seconds
+        while time.perf_counter() < end:
+            pass
+    return call, calls
+
+
+def test_call_durations_times_each_call_once():
+    call, calls = busy_for(0.002)
+    durations = call_durations(call, 5)
+    assert len(calls) == 5 and len(durations) == 5
+    assert all(d >= 0.002 for d in durations)   # each call spins at least 2 ms
+
+
+def test_median_call_ms_is_in_milliseconds():
+    call, calls = busy_for(0.003)
+    assert median_call_ms(call, 3) >= 3.0 and len(calls) == 3

@@ -27,7 +27,7 @@ import sys
 import time
 
 import cv2
-from helio_optics.bench_report import add_json_option, report
+from helio_optics.bench_report import add_json_option, median_call_ms, report
 from helio_perception.ground_plane import GroundMapping, MarkerDetector
 from helio_perception.spot_detection import SpotDetector, to_gray
 from helio_perception.synthetic_scene import SyntheticScene
@@ -36,16 +36,6 @@ import numpy as np
 
 
 JOINT_STATE_RATE = 20.0  # [Hz], the drivers' joint_state_rate_hz
-
-
-def median_ms(function, repeats):
-    """Return the median wall time of `function()` over `repeats` calls [ms]."""
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - start)
-    return 1e3 * float(np.median(times))
 
 
 def bare_opencv(image, threshold=220.0, kernel=5):
@@ -78,21 +68,21 @@ def bench_spot_and_marker(width, height, repeats, figures):
     # interleave the two so that both see the same load on the machine
     ours, bare = [], []
     for _ in range(5):
-        ours.append(median_ms(detect, repeats // 5))
-        bare.append(median_ms(lambda: bare_opencv(image), repeats // 5))
+        ours.append(median_call_ms(detect, repeats // 5))
+        bare.append(median_call_ms(lambda: bare_opencv(image), repeats // 5))
     size = f'{width}x{height}'
     figures[f'spot_detect_{size}_ms_median'] = float(np.median(ours))
     figures[f'spot_bare_opencv_{size}_ms_median'] = float(np.median(bare))
     figures[f'spot_detect_over_bare_{size}_ratio'] = float(np.median(ours) / np.median(bare))
     gray = to_gray(image)
-    figures[f'marker_detect_full_{size}_ms_median'] = median_ms(
+    figures[f'marker_detect_full_{size}_ms_median'] = median_call_ms(
         lambda: detector.detect(gray, scene.camera), max(repeats // 10, 10))
     corners = marker.pose.corners
     low, high = corners.min(axis=0), corners.max(axis=0)
     margin = 0.5 * np.max(high - low)
     x0, y0 = np.maximum(np.floor(low - margin), 0).astype(int)
     x1, y1 = np.minimum(np.ceil(high + margin), [width, height]).astype(int)
-    figures[f'marker_detect_roi_{size}_ms_median'] = median_ms(
+    figures[f'marker_detect_roi_{size}_ms_median'] = median_call_ms(
         lambda: detector.detect(gray, scene.camera, roi=(x0, y0, x1, y1)),
         max(repeats // 10, 10))
 
@@ -105,9 +95,9 @@ def bench_thermal(repeats, figures):
     celsius = (raw / 100.0 - 273.15).astype(np.float32)
     analyzer = ThermalAnalyzer()
     analyzer.statistics(raw, '16UC1')
-    figures['thermal_stats_160x120_16UC1_ms_median'] = median_ms(
+    figures['thermal_stats_160x120_16UC1_ms_median'] = median_call_ms(
         lambda: analyzer.statistics(raw, '16UC1'), repeats)
-    figures['thermal_stats_160x120_32FC1_ms_median'] = median_ms(
+    figures['thermal_stats_160x120_32FC1_ms_median'] = median_call_ms(
         lambda: analyzer.statistics(celsius, '32FC1'), repeats)
 
 
