@@ -35,35 +35,31 @@ def percentile_ms(samples, q):
     return float(np.percentile(np.array(samples) * 1000.0, q))
 
 
+def dobot_link_figures(samples, poll_seconds, warm_up=20, suffix='', **emulator_options):
+    """Round trip of GetPose [ms] and the pose polling rate [Hz] on one emulated Dobot link."""
+    figures = {}
+    with DobotEmulator(**emulator_options) as emulator:
+        client = DobotClient(emulator.port_path, timeout=0.5, retries=0)
+        client.connect()
+        call_durations(client.get_pose, warm_up)
+        durations = call_durations(client.get_pose, samples)
+        figures[f'dobot_roundtrip{suffix}_ms_median'] = percentile_ms(durations, 50)
+        figures[f'dobot_roundtrip{suffix}_ms_p99'] = percentile_ms(durations, 99)
+        count, started = 0, time.perf_counter()
+        while time.perf_counter() - started < poll_seconds:
+            client.get_pose()
+            count += 1
+        figures[f'dobot_pose_poll{suffix}_hz'] = count / (time.perf_counter() - started)
+        client.close()
+    return figures
+
+
 def bench_round_trips(samples, poll_seconds=2.0):
     """Round-trip latency of one command on each device, and the pose polling rate."""
-    figures = {}
-    with DobotEmulator() as emulator:
-        client = DobotClient(emulator.port_path, timeout=0.5, retries=0)
-        client.connect()
-        call_durations(client.get_pose, 20)        # warm up
-        durations = call_durations(client.get_pose, samples)
-        figures['dobot_roundtrip_ms_median'] = percentile_ms(durations, 50)
-        figures['dobot_roundtrip_ms_p99'] = percentile_ms(durations, 99)
-        count, started = 0, time.perf_counter()
-        while time.perf_counter() - started < poll_seconds:
-            client.get_pose()
-            count += 1
-        figures['dobot_pose_poll_hz'] = count / (time.perf_counter() - started)
-        client.close()
+    figures = dobot_link_figures(samples, poll_seconds)
     # the same with the replies held back by their time on a 115200 baud line
-    with DobotEmulator(line_baudrate=115200) as emulator:
-        client = DobotClient(emulator.port_path, timeout=0.5, retries=0)
-        client.connect()
-        durations = call_durations(client.get_pose, max(100, samples // 10))
-        figures['dobot_roundtrip_115200baud_ms_median'] = percentile_ms(durations, 50)
-        figures['dobot_roundtrip_115200baud_ms_p99'] = percentile_ms(durations, 99)
-        count, started = 0, time.perf_counter()
-        while time.perf_counter() - started < poll_seconds:
-            client.get_pose()
-            count += 1
-        figures['dobot_pose_poll_115200baud_hz'] = count / (time.perf_counter() - started)
-        client.close()
+    figures.update(dobot_link_figures(max(100, samples // 10), poll_seconds, warm_up=0,
+                                      suffix='_115200baud', line_baudrate=115200))
     with MaestroEmulator() as emulator:
         client = MaestroClient(emulator.port_path, timeout=0.5, retries=0)
         client.connect()
