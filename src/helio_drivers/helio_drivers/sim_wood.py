@@ -23,11 +23,11 @@ panel at the fine cell size, aligned with the fine cells), first order,
 d chi / dt = (1 - chi) A exp(-E / (R T)) where T > T_p, 0 below. Char raises the solar
 absorptance: alpha = alpha_wood + (alpha_char - alpha_wood) chi. The char raster is the
 painting. The same first-order reaction runs in every cell of the patch (the wood left to
-pyrolyse per cell, 1 at the start) and takes the heat of pyrolysis, the endothermic
-decomposition plus the enthalpy the escaping volatiles carry off, per kg of wood turned: it
-is what keeps the hot spot's depth from storing the heat that would otherwise hold it at the
-camera's cap long after the retreat (Sec. IV-B3). No exothermic char oxidation or flaming:
-the paper's lens is too weak for self-sustained burning (Sec. IV-B3).
+pyrolyse per cell, 1 at the start) and takes an endothermic heat of pyrolysis per kg of wood
+turned. It slows the heating a little; it does not set how long T_max stays at the camera's
+cap after the retreat (Sec. IV-B3): that is lateral conduction, faster along the face grain
+(world x, ``conductivity_along_grain``) than across it. No exothermic char oxidation or
+flaming: the paper's lens is too weak for self-sustained burning (Sec. IV-B3).
 
 Water and pyrolysis are heat sinks with a temperature recovery (an enthalpy method): per
 step, heat above the sink's temperature turns the reservoir (water, unpyrolysed wood) at the
