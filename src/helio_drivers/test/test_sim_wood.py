@@ -90,7 +90,7 @@ def test_steady_disk_source_centre_temperature_matches_closed_form(along_grain):
 
 
 def test_heat_spreads_faster_along_the_grain_as_diffusion_predicts():
-    # An initial Gaussian hot line pattern, lossless: each lateral variance grows by 2 a t.
+    # An initial Gaussian hot spot, lossless: each lateral variance grows by 2 a t per axis.
     wood = WoodParameters(**LOSSLESS)
     panel = WoodPanel(wood, extent=(-0.03, 0.03, -0.03, 0.03))
     x, y = np.meshgrid(panel.x_centres, panel.y_centres)
