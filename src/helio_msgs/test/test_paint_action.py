@@ -49,10 +49,10 @@ def test_paint_pattern_goal_feedback_result(private_context):
         goal = paint_pattern.Goal(points=[Point(x=0.05 + 0.005 * i, y=0.05) for i in range(4)],
                                   canvas_size=0.08, dot_radius=0.002, n_p_target=30,
                                   ordering='nearest_2opt', start_index=1)
-        sent = client.send_goal_async(goal, feedback_callback=lambda m: feedback.append(m))
-        goal_handle = wait(sent)
+        goal_handle = on_executor(executor, lambda: client.send_goal_async(
+            goal, feedback_callback=lambda m: feedback.append(m)))
         assert goal_handle.accepted
-        result = wait(goal_handle.get_result_async()).result
+        result = on_executor(executor, goal_handle.get_result_async).result
         assert (result.success, result.dots_burnt, result.dots_skipped) == (True, 3, 1)
         assert result.message == 'done'
         assert seen_goals[0].points[3].x == goal.points[3].x
@@ -63,7 +63,7 @@ def test_paint_pattern_goal_feedback_result(private_context):
 
         # A goal naming two sources of dots is rejected by the server.
         bad = paint_pattern.Goal(image_path='/tmp/x.png', points=[Point()])
-        assert not wait(client.send_goal_async(bad)).accepted
+        assert not on_executor(executor, lambda: client.send_goal_async(bad)).accepted
     finally:
         executor.shutdown()
         spinner.join(timeout=10.0)
@@ -71,6 +71,16 @@ def test_paint_pattern_goal_feedback_result(private_context):
         client.destroy()
         server_node.destroy_node()
         client_node.destroy_node()
+
+
+def on_executor(executor, request, timeout_sec=10.0):
+    """
+    Call `request()` on the executor's thread and wait for the future it returns.
+
+    rclpy 7.1.6's ActionClient registers a request's future after sending it, without a
+    lock: from another thread, a response taken in between by the executor is dropped.
+    """
+    return wait(wait(executor.create_task(request), timeout_sec), timeout_sec)
 
 
 def wait(future: Future, timeout_sec=10.0):

@@ -1,7 +1,9 @@
 """Every helio_msgs type survives rclpy.serialization with non-default values in every field."""
 
 import math
+import os
 import random
+import re
 
 from conftest import interface_names, load_interface
 import numpy as np
@@ -70,10 +72,20 @@ def message_classes():
     return classes
 
 
+def declared_in_cmakelists():
+    """Return (kind, name) of every interface file CMakeLists.txt declares."""
+    path = os.path.join(os.path.dirname(__file__), '..', 'CMakeLists.txt')
+    with open(path) as stream:
+        found = re.findall(r'"(msg|srv|action)/(\w+)\.\1"', stream.read())
+    return sorted(found)
+
+
 def test_every_declared_interface_is_covered():
-    # The package declares 5 messages, 1 service and 4 actions: 5 + 2 + 12 classes.
-    assert len(interface_names()) == 10
-    assert len(message_classes()) == 19
+    declared = declared_in_cmakelists()
+    assert sorted(interface_names()) == declared
+    kinds = [kind for kind, _ in declared]
+    assert len(message_classes()) == (kinds.count('msg') + 2 * kinds.count('srv')
+                                      + 3 * kinds.count('action'))
 
 
 @pytest.mark.parametrize('label,cls', message_classes(), ids=[c[0] for c in message_classes()])
@@ -84,8 +96,12 @@ def test_round_trip_preserves_every_field(label, cls):
     data = serialize_message(original)
     restored = deserialize_message(data, cls)
     assert restored == original, label
-    # Serialising the copy gives the same bytes: nothing was lost or reinterpreted.
-    assert serialize_message(restored) == data
+    # Serialising the copy gives as many bytes that read back the same: nothing was lost or
+    # reinterpreted. (Not byte-equal: the serializer leaves the alignment padding after a
+    # final bool uninitialised, seen with CalibrateFocus.Goal.)
+    again = serialize_message(restored)
+    assert len(again) == len(data)
+    assert deserialize_message(again, cls) == original
 
 
 def test_float_fields_keep_full_double_precision():
