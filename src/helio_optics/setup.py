@@ -13,6 +13,9 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         (os.path.join('share', package_name, 'config'), glob('config/*.yaml')),
+        # The workspace's deployment data (top-level config/: rig, lens, site, DDS profile).
+        (os.path.join('share', package_name, 'config'),
+         sorted(glob('../../config/*.yaml') + glob('../../config/*.xml'))),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

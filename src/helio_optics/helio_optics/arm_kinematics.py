@@ -56,12 +56,18 @@ class DobotArmParameters:
     j1_limits: tuple = (math.radians(-90.0), math.radians(90.0))
     j2_limits: tuple = (math.radians(0.0), math.radians(85.0))
     j3_limits: tuple = (math.radians(-10.0), math.radians(95.0))
+    j4_limits: tuple = (math.radians(-150.0), math.radians(150.0))   # end servo (unused by
+    #                                                                  the lens rig)
 
     def limits(self):
         """Return the three joint limits in order."""
         return (JointLimit('j1 (base)', *self.j1_limits),
                 JointLimit('j2 (rear arm)', *self.j2_limits),
                 JointLimit('j3 (forearm)', *self.j3_limits))
+
+    def end_servo_limit(self):
+        """Return the JointLimit of the end servo j4."""
+        return JointLimit('j4 (end servo)', *self.j4_limits)
 
 
 class DobotArm:

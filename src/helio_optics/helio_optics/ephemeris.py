@@ -3,8 +3,8 @@ Sun position from pysolar and the time update of the estimate (paper Sec. IV-C, 
 
 API
 ---
-``Site(latitude_deg, longitude_deg, elevation_m=0.0, temperature_c=12.0,
-pressure_pa=101325.0)``: where the robot stands (degrees north/east; height above sea
+``Site(latitude_deg, longitude_deg, elevation=0.0, temperature=12.0,
+pressure=101325.0)``: where the robot stands (degrees north/east; height above sea
 level [m]; air temperature and pressure for refraction).
 
 ``sun_position(site, when) -> SunPosition(elevation, azimuth)``: the apparent sun
@@ -20,6 +20,11 @@ phi0_t = phi0 + (e_t - e_t0), theta0_t = theta0 - (A_t - A_t0) (mod 2 pi).
 
 ``corrected_direction(phi0, theta0, anchor, now)``: the robot-frame unit ray s0 at time t.
 
+``angle_offsets(anchor, now) -> (dphi, dtheta)``: the change Eq 18 adds to the ray angles
+between two sun positions (dtheta wrapped to [-pi, pi)); the sun estimator moves each
+observation of a sweep to one reference time with it (``sun_estimation.Observation``'s
+``angle_offset``).
+
 ``ray_angles_from_sun(position, heading)``: the ray angles (phi0, theta0) for a sun
 position and a robot heading (the compass azimuth of the robot's x axis, clockwise from
 north [rad]); the simulated world uses it to place its sun from the same ephemeris.
@@ -29,6 +34,7 @@ from dataclasses import dataclass
 import datetime
 import math
 
+from helio_optics.config_files import read_parameter_section
 from helio_optics.geometry import direction_from_angles
 from pysolar import solar
 
@@ -39,9 +45,9 @@ class Site:
 
     latitude_deg: float
     longitude_deg: float
-    elevation_m: float = 0.0
-    temperature_c: float = 12.0
-    pressure_pa: float = 101325.0
+    elevation: float = 0.0
+    temperature: float = 12.0
+    pressure: float = 101325.0
 
     def __post_init__(self):
         """Reject coordinates outside the globe."""
@@ -49,6 +55,16 @@ class Site:
             raise ValueError(f'latitude must be in [-90, 90] deg, got {self.latitude_deg}')
         if not -180.0 <= self.longitude_deg <= 360.0:
             raise ValueError(f'longitude must be in [-180, 360] deg, got {self.longitude_deg}')
+
+
+def load_site(path):
+    """Read the Site from a ROS 2 parameter file's ``site`` section (config/site.yaml)."""
+    flat = read_parameter_section(path, 'site')
+    names = set(Site.__dataclass_fields__)
+    unknown = sorted(set(flat) - names)
+    if unknown:
+        raise ValueError(f'{path}: unknown site parameter(s) {unknown}; known: {sorted(names)}')
+    return Site(**{name: float(value) for name, value in flat.items()})
 
 
 @dataclass(frozen=True)
@@ -67,20 +83,25 @@ def sun_position(site, when):
         raise ValueError(
             f'naive datetime {when.isoformat()}: give a timezone (e.g. tzinfo=timezone.utc)')
     altitude = solar.get_altitude(site.latitude_deg, site.longitude_deg, when,
-                                  elevation=site.elevation_m,
-                                  temperature=site.temperature_c + 273.15,
-                                  pressure=site.pressure_pa)
+                                  elevation=site.elevation,
+                                  temperature=site.temperature + 273.15,
+                                  pressure=site.pressure)
     azimuth = solar.get_azimuth(site.latitude_deg, site.longitude_deg, when,
-                                elevation=site.elevation_m)
+                                elevation=site.elevation)
     return SunPosition(elevation=math.radians(altitude),
                        azimuth=math.radians(azimuth) % (2.0 * math.pi))
 
 
+def angle_offsets(anchor, now):
+    """Eq 18's change of the ray angles (dphi, dtheta) [rad] from SunPosition `anchor` to `now`."""
+    dtheta = -(now.azimuth - anchor.azimuth)
+    return now.elevation - anchor.elevation, math.remainder(dtheta, 2.0 * math.pi)
+
+
 def corrected_angles(phi0, theta0, anchor, now):
     """Eq 18: ray angles (phi0, theta0) [rad] at `now` from an estimate made at `anchor`."""
-    phi_t = phi0 + (now.elevation - anchor.elevation)
-    theta_t = (theta0 - (now.azimuth - anchor.azimuth)) % (2.0 * math.pi)
-    return phi_t, theta_t
+    dphi, dtheta = angle_offsets(anchor, now)
+    return phi0 + dphi, (theta0 + dtheta) % (2.0 * math.pi)
 
 
 def corrected_direction(phi0, theta0, anchor, now):

@@ -39,9 +39,10 @@ transmission (0 for TIR), ``hit`` (N,) bool, ``tir_count``, ``incident_power`` [
 O_l, f + t (1 - 1/n).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 
+from helio_optics.config_files import read_parameter_section
 from helio_optics.geometry import homogeneous, unit
 import numpy as np
 
@@ -111,6 +112,54 @@ class LensParameters:
         """Transform of the optics frame (sphere centre) into the lens frame (Eq 1)."""
         return homogeneous(translation=[0.0, 0.0, -self.sphere_radius *
                                         math.cos(self.bounding_polar_angle)])
+
+
+# Sunlight through acrylic (DESIGN.md): PMMA's index falls from 1.502 at 437 nm to about
+# 1.482 at 1.5 um (Cauchy fit n = A + B / l^2 through 1.4914 at 587.6 nm, 1.502 at 437 nm,
+# 1.489 at 633 nm), so the focus of a tilted lens spreads by colour and its power centre
+# moves. The bands: (centre wavelength [um], share of the direct solar power (AM1.5 direct)
+# that acrylic passes).
+PMMA_CAUCHY_A = 1.4799
+PMMA_CAUCHY_B = 0.00434     # [um^2]
+SOLAR_BANDS = ((0.45, 0.17), (0.55, 0.18), (0.65, 0.16), (0.80, 0.22), (1.00, 0.15),
+               (1.30, 0.12))
+
+
+def pmma_index(wavelength_um):
+    """Return acrylic's refractive index at `wavelength_um` [um] (Cauchy fit)."""
+    return PMMA_CAUCHY_A + PMMA_CAUCHY_B / wavelength_um ** 2
+
+
+def spectral_lenses(lens, bands=SOLAR_BANDS):
+    """
+    Return [(band lens, weight)]: `lens` at each band's index, weights summing to 1.
+
+    The facets are cut once, for the design index: every band keeps the design's sphere
+    radius (so its focal length is r_s / (n_band - 1)); trace each band with samples made
+    for the design lens and ``replace(samples, lens=band_lens)`` to keep the facet slopes.
+    """
+    weights = np.array([w for _, w in bands], dtype=float)
+    if weights.ndim != 1 or np.any(weights < 0.0) or weights.sum() <= 0.0:
+        raise ValueError('spectral band weights must be >= 0 with a positive sum')
+    weights /= weights.sum()
+    offset = lens.refractive_index - pmma_index(0.5876)
+    lenses = []
+    for (wavelength, _), weight in zip(bands, weights):
+        index = pmma_index(wavelength) + offset
+        lenses.append((replace(lens, refractive_index=index,
+                               focal_length=lens.sphere_radius / (index - 1.0)),
+                       float(weight)))
+    return lenses
+
+
+def load_lens_parameters(path):
+    """Read LensParameters from a ROS 2 parameter file's ``lens`` section (config/lens.yaml)."""
+    flat = read_parameter_section(path, 'lens')
+    names = set(LensParameters.__dataclass_fields__)
+    unknown = sorted(set(flat) - names)
+    if unknown:
+        raise ValueError(f'{path}: unknown lens parameter(s) {unknown}; known: {sorted(names)}')
+    return LensParameters(**flat)
 
 
 def paraxial_focus_distance(lens):

@@ -33,15 +33,19 @@ gives the same flat dict (for declaring ROS parameters).
   with ``reason`` when unreachable).
 - ``yaw_pitch_for_axis(axis, preferred_yaw=None)``: Eq 15 alone, the servo-reachable
   solution closest to ``preferred_yaw``.
+
+A non-finite number given to ``inverse``, ``lens_pose_for_target`` or
+``yaw_pitch_for_axis`` (a NaN target, sun, axis or angle) raises ValueError naming the input,
+instead of NaN joints with an empty reason.
 """
 
 from dataclasses import dataclass, field, fields, replace
 import math
-import os
 
 from helio_optics.arm_kinematics import check_joint_limits, DobotArm, DobotArmParameters
 from helio_optics.arm_kinematics import JointLimit
 from helio_optics.arm_kinematics import UnreachableError
+from helio_optics.config_files import config_path, read_parameter_section
 from helio_optics.geometry import homogeneous, look_at, rotation_y, rotation_z, unit
 import numpy as np
 
@@ -49,6 +53,16 @@ JOINT_NAMES = ('dobot_j1', 'dobot_j2', 'dobot_j3', 'lens_yaw', 'lens_pitch')
 
 __all__ = ['JOINT_NAMES', 'LensTarget', 'Rig', 'RigParameters', 'RigPose', 'UnreachableError',
            'camera_mount', 'default_rig_file', 'load_rig_parameters']
+
+
+def _finite(name, value, size=None):
+    """Return `value` as floats (shape (size,) when given); ValueError naming a non-finite one."""
+    array = np.asarray(value, dtype=float)
+    if size is not None:
+        array = array.reshape(size)
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f'{name} must be finite, got {array.tolist()}')
+    return array if size is not None else float(array)
 
 
 def camera_mount(position, focus_depth, up=(1.0, 0.0, 0.0)):
@@ -131,43 +145,13 @@ class RigParameters:
 
 
 def default_rig_file():
-    """
-    Return helio_optics' config/rig.yaml, or None when it cannot be found.
-
-    The installed package share first (ament index), then the source tree beside this module.
-    """
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        path = os.path.join(get_package_share_directory('helio_optics'), 'config', 'rig.yaml')
-        if os.path.exists(path):
-            return path
-    except (ImportError, LookupError, OSError):
-        pass
-    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'config', 'rig.yaml')
-    return path if os.path.exists(path) else None
+    """Return the workspace's config/rig.yaml (see ``config_files``), or None when missing."""
+    return config_path('rig.yaml', required=False)
 
 
 def load_rig_parameters(path):
     """Read RigParameters from a ROS 2 parameter file (``/**: ros__parameters: rig: ...``)."""
-    import yaml
-
-    with open(path) as stream:
-        document = yaml.safe_load(stream) or {}
-    for node in document.values():
-        parameters = (node or {}).get('ros__parameters', {})
-        if 'rig' in parameters:
-            return RigParameters.from_parameters(_flatten(parameters['rig']))
-    raise ValueError(f'{path}: no ros__parameters.rig section')
-
-
-def _flatten(tree, prefix=''):
-    flat = {}
-    for key, value in tree.items():
-        if isinstance(value, dict):
-            flat.update(_flatten(value, prefix + key + '.'))
-        else:
-            flat[prefix + key] = value
-    return flat
+    return RigParameters.from_parameters(read_parameter_section(path, 'rig'))
 
 
 @dataclass
@@ -228,7 +212,8 @@ class Rig:
         UnreachableError naming the joint (or the reach) and by how much.
         """
         p = self.parameters
-        position = np.asarray(position, dtype=float).reshape(3)
+        position = _finite('lens position', position, 3)
+        yaw, pitch = _finite('lens yaw', yaw), _finite('lens pitch', pitch)
         rotation_yaw = rotation_z(yaw)
         # q = flange + Rz(j1) a, with a the yaw-axis offset in the flange frame.
         q = position - rotation_yaw @ (np.asarray(p.pitch_axis_offset, dtype=float)
@@ -258,6 +243,21 @@ class Rig:
             self.check_limits(x)
         return x
 
+    def set_world(self, world_in_robot, world_yaw):
+        """
+        Use a calibrated T_robot_world: the marker centre [m] and its yaw [rad], robot frame.
+
+        The robot-world calibration (paper Sec. II-B) measures these at the start of each
+        painting; the rig file's values are the starting guess.
+        """
+        position = tuple(float(v) for v in np.asarray(world_in_robot, dtype=float).ravel())
+        if len(position) != 3 or not all(math.isfinite(v) for v in position) \
+                or not math.isfinite(world_yaw):
+            raise ValueError(f'world_in_robot must be 3 finite numbers and world_yaw finite, '
+                             f'got {world_in_robot!r} and {world_yaw!r}')
+        self.parameters = replace(self.parameters, world_in_robot=position,
+                                  world_yaw=float(world_yaw))
+
     def check_limits(self, x):
         """Raise UnreachableError for the first joint of x outside its limits."""
         check_joint_limits(self.parameters.limits(), x)
@@ -270,8 +270,11 @@ class Rig:
         servo yaw (alpha - j1, j1 unknown here: relative to `preferred_yaw`) is closest to
         `preferred_yaw` (default 0). A vertical axis keeps alpha = preferred_yaw.
         """
-        axis = unit(np.asarray(axis, dtype=float).reshape(3))
-        reference = 0.0 if preferred_yaw is None else float(preferred_yaw)
+        axis = _finite('lens axis', axis, 3)
+        if not np.any(axis):
+            raise ValueError('lens axis must not be the zero vector')
+        axis = unit(axis)
+        reference = 0.0 if preferred_yaw is None else _finite('preferred_yaw', preferred_yaw)
         horizontal = math.hypot(axis[0], axis[1])
         if horizontal < 1e-12:
             return reference, math.atan2(horizontal, axis[2])
@@ -291,12 +294,18 @@ class Rig:
         one nearest `preferred_yaw` first); the result's ``x`` is None with ``reason``
         when neither is reachable.
         """
-        if not d_lp > 0.0:
-            raise ValueError(f'd_lp must be > 0 m, got {d_lp}')
-        s0 = unit(np.asarray(sun_direction, dtype=float).reshape(3))
+        if not (math.isfinite(d_lp) and d_lp > 0.0):
+            raise ValueError(f'd_lp must be a finite value > 0 m, got {d_lp}')
+        target = _finite('target', target, 3)
+        sun_direction = _finite('sun_direction', sun_direction, 3)
+        if not np.any(sun_direction):
+            raise ValueError('sun_direction must not be the zero vector')
+        if preferred_yaw is not None:
+            preferred_yaw = _finite('preferred_yaw', preferred_yaw)
+        s0 = unit(sun_direction)
         if s0[2] >= 0.0:
             raise ValueError(f'the sun ray {s0} does not point down: the sun is not up')
-        position = np.asarray(target, dtype=float).reshape(3) - d_lp * s0
+        position = target - d_lp * s0
         heading = math.atan2(position[1], position[0])
         reference = heading if preferred_yaw is None else preferred_yaw
         yaw, pitch = self.yaw_pitch_for_axis(-s0, reference)

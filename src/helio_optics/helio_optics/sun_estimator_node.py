@@ -1,37 +1,56 @@
 """
 Node sun_estimator: estimate the sun's ray from light-spot observations (Sec. III-C, Eq 18).
 
-Subscribes ``/spot`` (helio_msgs/SpotObservation) and ``/joint_states``; keeps the recent
-valid spots, each with the lens pose from the joint states nearest its image stamp.
-Service ``/estimate_sun`` (helio_msgs/EstimateSun) runs ``SunEstimator`` on them and, on
-success, publishes ``/sun/estimate`` (helio_msgs/SunEstimate, reliable, transient local).
-A timer republishes the estimate moved along with the sun by Eq 18 (pysolar at the site).
-Parameters: see ``config/sun_estimator.yaml`` (all declared with descriptors).
+Subscribes ``spot`` (helio_msgs/SpotObservation) and ``joint_states`` (the drivers' partial
+messages merged by ``JointStateBuffer``); keeps the recent valid spots (FULL quality only),
+each with the lens pose from the joints at its
+image stamp and the pysolar sun position at that stamp. Service ``estimate_sun``
+(helio_msgs/EstimateSun) moves every observation to one reference time (the middle of the
+observations used) by Eq 18, runs ``SunEstimator`` and answers with the estimate at that
+time; ``success`` only when it is trustworthy (a minimum that fits within the noise, not
+ambiguous), else the reason. A trustworthy estimate is published on ``sun/estimate``
+(helio_msgs/SunEstimate, reliable, transient local) moved to the time of publication, and a
+timer republishes it moved along with the sun by Eq 18. Names are relative (the node runs
+under a namespace with its rig). Parameters: see ``config/sun_estimator.yaml`` (all declared
+with descriptors; those read per estimate are dynamic, the others read-only).
 """
 
-import bisect
+import copy
+from dataclasses import dataclass, replace
 import datetime
 import math
 
 from helio_msgs.msg import SpotObservation, SunEstimate
 from helio_msgs.srv import EstimateSun
-from helio_optics.ephemeris import corrected_angles, Site, sun_position
+from helio_optics.ephemeris import angle_offsets, corrected_angles, sun_position
 from helio_optics.geometry import direction_from_angles, transform_points
-from helio_optics.lens import LensParameters
-from helio_optics.node_parameters import declare
-from helio_optics.node_runner import run_node
-from helio_optics.rig_kinematics import default_rig_file, JOINT_NAMES, load_rig_parameters, Rig
-from helio_optics.sun_estimation import METHODS, Observation, SunEstimator
+from helio_optics.node_kit.conversions import point_to_array, stamp_from_seconds
+from helio_optics.node_kit.conversions import stamp_to_nanoseconds, stamp_to_seconds
+from helio_optics.node_kit.deployment import declare_lens, declare_rig, declare_site
+from helio_optics.node_kit.deployment import follow_world_calibration
+from helio_optics.node_kit.joint_states import JointStateBuffer
+from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.runner import run_node
+from helio_optics.sun_estimation import METHODS, Observation, SunEstimator, TrustSettings
 import numpy as np
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
 
 def stamp_to_datetime(stamp_ns):
     """UTC datetime of a ROS time in nanoseconds."""
     return datetime.datetime.fromtimestamp(stamp_ns * 1e-9, tz=datetime.timezone.utc)
+
+
+@dataclass
+class _Buffered:
+    """One spot observation with what the estimate needs besides it."""
+
+    stamp: object            # builtin_interfaces/Time of the image
+    seconds: float
+    observation: Observation
+    sun: object              # pysolar SunPosition at the stamp (None: ephemeris failed)
 
 
 class SunEstimatorNode(Node):
@@ -42,121 +61,114 @@ class SunEstimatorNode(Node):
         super().__init__('sun_estimator', **kwargs)
         self._declare_parameters()
         p = self._parameter
-        lens = LensParameters(
-            focal_length=p('lens.focal_length'), refractive_index=p('lens.refractive_index'),
-            thickness=p('lens.thickness'), aperture_diameter=p('lens.aperture_diameter'),
-            transmission=p('lens.transmission'), facets=p('lens.facets'))
-        rig_file = p('rig_config') or default_rig_file()
-        if not rig_file:
-            raise FileNotFoundError('no rig_config given and no helio_optics config/rig.yaml')
-        self.rig = Rig(load_rig_parameters(rig_file))
+        lens, lens_file = declare_lens(self)
+        self.rig, rig_file = declare_rig(self)
+        follow_world_calibration(self, self.rig)     # T_robot_world from the marker
         self.estimator = SunEstimator(lens, p('rim_points'), p('contour_fraction'))
         if p('method') not in METHODS:
             raise ValueError(f"parameter method must be one of {METHODS}, got {p('method')!r}")
-        self.site = Site(p('site.latitude_deg'), p('site.longitude_deg'), p('site.elevation_m'),
-                         p('site.temperature_c'), p('site.pressure_pa'))
-        self._joint_stamps, self._joint_values = [], []
-        self._observations = []  # (stamp_ns, Observation)
+        self._trust()  # a start-up value TrustSettings refuses stops the node, named
+        self.site, site_file = declare_site(self)
+        self.joints = JointStateBuffer()
+        self._observations = []  # _Buffered, oldest first
         self._estimate = None    # (SunEstimate message at the anchor, anchor SunPosition)
         self.estimate_publisher = self.create_publisher(
-            SunEstimate, '/sun/estimate',
+            SunEstimate, 'sun/estimate',
             QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        self.create_subscription(JointState, '/joint_states', self._on_joint_state, 50)
-        self.create_subscription(SpotObservation, '/spot', self._on_spot, 20)
-        self.create_service(EstimateSun, '/estimate_sun', self._on_estimate_sun)
+        self.create_subscription(JointState, 'joint_states', self._on_joint_state, 50)
+        self.create_subscription(SpotObservation, 'spot', self._on_spot, 20)
+        self.create_service(EstimateSun, 'estimate_sun', self._on_estimate_sun)
         period = p('update_period')
         if period > 0.0:
             self.create_timer(period, self._on_timer)
         self.get_logger().info(
-            f"sun_estimator ready: method {p('method')}, rig from {rig_file}, site "
-            f'{self.site.latitude_deg:.4f}, {self.site.longitude_deg:.4f}')
+            f"sun_estimator ready: method {p('method')}, rig from {rig_file}, lens from "
+            f'{lens_file}, site {self.site.latitude_deg:.4f}, {self.site.longitude_deg:.4f} '
+            f'from {site_file}, FULL spots only')
 
     # -- parameters --------------------------------------------------------------------------
     def _declare_parameters(self):
         declare(self, 'method', 'levenberg_marquardt',
                 "default solver: 'levenberg_marquardt' (joint, robust) or "
-                "'interaction_matrix' (the paper's Eqs 11-12)")
-        declare(self, 'lens.focal_length', 0.080, 'lens focal length f [m]', 0.01, 1.0)
-        declare(self, 'lens.refractive_index', 1.4914, 'lens refractive index n [-]', 1.01, 3.0)
-        declare(self, 'lens.thickness', 0.002, 'lens plate thickness [m]', 0.0, 0.02)
-        declare(self, 'lens.aperture_diameter', 0.058, 'lens clear aperture diameter [m]',
-                0.001, 1.0)
-        declare(self, 'lens.transmission', 0.92, 'lens transmission kappa [-]', 0.01, 1.0)
-        declare(self, 'lens.facets', 'corrected', "'corrected' or 'spherical' (paper Eq 3)")
-        declare(self, 'rig_config', '',
-                'rig geometry YAML (empty: helio_optics config/rig.yaml)')
+                "'interaction_matrix' (the paper's Eqs 11-12)", dynamic=True)
         declare(self, 'rim_points', 64, 'rays traced on the contour ring of the model [-]',
                 8, 4096)
         declare(self, 'contour_fraction', 1.0,
                 'radius of the modelled contour ring over the aperture radius (1: rim) [-]',
                 0.05, 1.0)
         declare(self, 'centre_sigma', 0.5e-3,
-                'standard deviation of a spot centre on the ground [m]', 1e-6, 0.05)
+                'standard deviation of a spot centre on the ground [m]', 1e-6, 0.05, dynamic=True)
         declare(self, 'max_observations', 60, 'spot observations kept for an estimate [-]',
-                1, 10000)
+                1, 10000, dynamic=True)
         declare(self, 'max_observation_age', 300.0,
-                'observations older than this are dropped [s]', 0.1, 1e6)
-        declare(self, 'joint_state_tolerance', 0.1,
+                'observations older than this are dropped [s]', 0.1, 1e6, dynamic=True)
+        declare(self, 'joint_state_tolerance', 0.3,
                 'largest time between a spot image and the joint state used for it [s]',
-                0.0, 10.0)
-        declare(self, 'gain', 0.9, 'interaction-matrix gain lambda (Eq 11) [-]', 0.01, 2.0)
-        declare(self, 'delta', 1e-5, 'interaction-matrix step delta (Eq 12) [rad]', 1e-9, 0.1)
+                0.0, 10.0, dynamic=True)
+        declare(self, 'gain', 0.9, 'interaction-matrix gain lambda (Eq 11) [-]', 0.01, 2.0,
+                dynamic=True)
+        declare(self, 'delta', 1e-5, 'interaction-matrix step delta (Eq 12) [rad]', 1e-9, 0.1,
+                dynamic=True)
         declare(self, 'tolerance', 1e-9, 'interaction-matrix stop on ||y_t - y_img|| [-]',
-                1e-15, 1.0)
-        declare(self, 'max_iterations', 60, 'iteration limit of either solver [-]', 1, 10000)
-        declare(self, 'site.latitude_deg', 46.5197, 'site latitude, north positive [deg]',
-                -90, 90)
-        declare(self, 'site.longitude_deg', 6.6323, 'site longitude, east positive [deg]',
-                -180, 360)
-        declare(self, 'site.elevation_m', 400.0, 'site height above sea level [m]', -500, 9000)
-        declare(self, 'site.temperature_c', 20.0, 'air temperature for refraction [degC]',
-                -60, 60)
-        declare(self, 'site.pressure_pa', 101325.0, 'air pressure for refraction [Pa]',
-                3e4, 1.2e5)
+                1e-15, 1.0, dynamic=True)
+        declare(self, 'max_iterations', 60, 'iteration limit of either solver [-]', 1, 10000,
+                dynamic=True)
         declare(self, 'update_period', 5.0,
-                'period of the Eq 18 update of /sun/estimate (0: off) [s]', 0.0, 3600.0)
+                'period of the Eq 18 update of sun/estimate (0: off) [s]', 0.0, 3600.0)
+        # When an estimate is trusted (sun_estimation.TrustSettings).
+        declare(self, 'fit_alpha', 1e-3,
+                'significance of the chi-square test the fit must pass to count as converged '
+                '[-]', 1e-12, 0.5, dynamic=True)
+        declare(self, 'outlier_alpha', 1e-4,
+                'significance at which one observation is left out as an outlier [-]',
+                1e-15, 0.5, dynamic=True)
+        declare(self, 'max_outlier_fraction', 0.25,
+                'outliers must stay below this fraction of the plausible observations [-]',
+                0.01, 1.0, dynamic=True)
+        declare(self, 'step_tolerance', 0.01,
+                'converged: the Newton step is below this many standard deviations [-]',
+                1e-6, 1.0, dynamic=True)
+        declare(self, 'ambiguity_chi2', 9.21,
+                'another minimum within this chi-square of the estimate fits as well '
+                '(9.21: the 99% region of two parameters) [-]', 0.01, 1000.0, dynamic=True)
+        declare(self, 'ambiguity_separation_deg', 0.05,
+                'minima closer than this are the same answer [deg]', 1e-4, 10.0, dynamic=True)
+        declare(self, 'plane_tolerance', 2e-3,
+                'a spot centre farther than this off the ground plane is left out [m]',
+                1e-6, 1.0, dynamic=True)
+        declare(self, 'min_chief_ray_elevation_deg', 3.0,
+                'a spot whose chief ray (lens centre to spot) rises less above the ground is '
+                'left out (a centre metres away) [deg]', 0.0, 80.0, dynamic=True)
 
     def _parameter(self, name):
         return self.get_parameter(name).value
 
+    def _trust(self):
+        p = self._parameter
+        return TrustSettings(
+            fit_alpha=p('fit_alpha'), outlier_alpha=p('outlier_alpha'),
+            max_outlier_fraction=p('max_outlier_fraction'), step_tolerance=p('step_tolerance'),
+            ambiguity_chi2=p('ambiguity_chi2'),
+            ambiguity_separation=math.radians(p('ambiguity_separation_deg')),
+            plane_tolerance=p('plane_tolerance'),
+            min_chief_ray_elevation=math.radians(p('min_chief_ray_elevation_deg')))
+
     # -- inputs ------------------------------------------------------------------------------
     def _on_joint_state(self, message):
-        index = {name: i for i, name in enumerate(message.name)}
-        if not all(name in index for name in JOINT_NAMES):
-            return  # a partial message (e.g. only the wrist); wait for complete ones
-        try:
-            values = np.array([message.position[index[name]] for name in JOINT_NAMES], float)
-        except IndexError:
-            self.get_logger().warning('joint_states with fewer positions than names: skipped')
-            return
-        if not np.all(np.isfinite(values)):
-            self.get_logger().warning('joint_states with NaN/inf positions: skipped')
-            return
-        stamp = Time.from_msg(message.header.stamp).nanoseconds
-        if self._joint_stamps and stamp < self._joint_stamps[-1]:
-            self._joint_stamps, self._joint_values = [], []  # time went back (sim restart)
-        self._joint_stamps.append(stamp)
-        self._joint_values.append(values)
-        if len(self._joint_stamps) > 2000:
-            del self._joint_stamps[:1000], self._joint_values[:1000]
-
-    def _joints_at(self, stamp):
-        if not self._joint_stamps:
-            return None, 'no complete /joint_states received yet'
-        i = bisect.bisect_left(self._joint_stamps, stamp)
-        candidates = [j for j in (i - 1, i) if 0 <= j < len(self._joint_stamps)]
-        best = min(candidates, key=lambda j: abs(self._joint_stamps[j] - stamp))
-        gap = abs(self._joint_stamps[best] - stamp) * 1e-9
-        if gap > self._parameter('joint_state_tolerance'):
-            return None, f'nearest joint state is {gap:.3f} s from the image'
-        return self._joint_values[best], ''
+        problem = self.joints.add_message(message)
+        if problem:
+            self.get_logger().warning(problem, throttle_duration_sec=5.0)
 
     def _on_spot(self, message):
         if not message.valid:
             self.get_logger().debug(f'invalid spot skipped: {message.reason}')
             return
-        centre = np.array([message.center.x, message.center.y, message.center.z])
+        if message.quality != SpotObservation.FULL:
+            self.get_logger().debug(f'spot of quality {message.quality} (not FULL) skipped: '
+                                    f'{message.quality_reason}')
+            return
+        centre = point_to_array(message.center)
         if not np.all(np.isfinite(centre)):
             self.get_logger().warning('spot with a NaN/inf centre: skipped')
             return
@@ -166,24 +178,25 @@ class SunEstimatorNode(Node):
         elif frame != 'robot':
             self.get_logger().warning(f"spot in frame '{frame}' (want world or robot): skipped")
             return
-        stamp = Time.from_msg(message.header.stamp).nanoseconds
-        joints, reason = self._joints_at(stamp)
-        if joints is None:
-            self.get_logger().warning(f'spot skipped: {reason}')
+        stamp = stamp_to_seconds(message.header.stamp)
+        lookup = self.joints.at(stamp, self._parameter('joint_state_tolerance'))
+        if not lookup:
+            self.get_logger().warning(f'spot skipped: {lookup.reason}',
+                                      throttle_duration_sec=2.0)
             return
         T_world = self.rig.parameters.T_robot_world
-        observation = Observation(centre, self.rig.forward(joints).T_robot_lens,
+        observation = Observation(centre, self.rig.forward(lookup.positions).T_robot_lens,
                                   T_world[:3, 3], T_world[:3, 2], self._parameter('centre_sigma'))
-        self._observations.append((stamp, observation))
+        sun = self._sun_at(stamp_to_nanoseconds(message.header.stamp))
+        self._observations.append(_Buffered(message.header.stamp, stamp, observation, sun))
         del self._observations[:-self._parameter('max_observations')]
 
     # -- estimation --------------------------------------------------------------------------
     def _recent_observations(self, limit):
-        now = self.get_clock().now().nanoseconds
-        age = self._parameter('max_observation_age') * 1e9
-        self._observations = [(s, o) for s, o in self._observations if now - s <= age]
-        chosen = [o for _, o in self._observations]
-        return chosen[-limit:] if limit else chosen
+        now = self.get_clock().now().nanoseconds * 1e-9
+        age = self._parameter('max_observation_age')
+        self._observations = [b for b in self._observations if now - b.seconds <= age]
+        return self._observations[-limit:] if limit else list(self._observations)
 
     def _on_estimate_sun(self, request, response):
         method = request.method or self._parameter('method')
@@ -191,89 +204,146 @@ class SunEstimatorNode(Node):
             response.success = False
             response.message = f'unknown method {method!r}; use one of {METHODS}'
             return response
-        observations = self._recent_observations(int(request.max_observations))
-        if not observations:
+        buffered = self._recent_observations(int(request.max_observations))
+        if not buffered:
             response.success = False
             response.message = ('no valid spot observation with joint states in the last '
                                 f"{self._parameter('max_observation_age'):g} s")
             return response
+        try:
+            trust = self._trust()
+        except ValueError as error:
+            response.success = False
+            response.message = f'trust parameters refused: {error}'
+            return response
+        # Eq 18: every observation moved to one reference time, the middle of the sweep.
+        seconds = [b.seconds for b in buffered]
+        reference = 0.5 * (min(seconds) + max(seconds))
+        reference_stamp = stamp_from_seconds(reference)
+        anchor = self._sun_at(stamp_to_nanoseconds(reference_stamp))
+        corrected = anchor is not None and all(b.sun is not None for b in buffered)
+        sigma = self._parameter('centre_sigma')
+        observations = [replace(b.observation, sigma=sigma, angle_offset=angle_offsets(
+            anchor, b.sun) if corrected else (0.0, 0.0)) for b in buffered]
         options = {'max_iterations': self._parameter('max_iterations')}
         if method == 'interaction_matrix':
             options.update(gain=self._parameter('gain'), delta=self._parameter('delta'),
                            tolerance=self._parameter('tolerance'))
         try:
-            result = self.estimator.estimate(observations, method=method, **options)
+            result = self.estimator.estimate(observations, method=method, trust=trust,
+                                             **options)
         except ValueError as error:
             response.success = False
             response.message = f'estimation failed: {error}'
             return response
-        stamp = self.get_clock().now()
-        message = self._message(result, stamp)
+        message = self._message(result, buffered, reference_stamp, anchor, corrected)
         response.estimate = message
-        response.success = bool(result.converged)
-        if not result.converged:
-            response.message = f'{method} did not converge: {result.reason}'
+        response.success = result.trustworthy
+        when = stamp_to_datetime(stamp_to_nanoseconds(reference_stamp)).isoformat()
+        time_note = (f'at {when} (the middle of observations spanning '
+                     f'{max(seconds) - min(seconds):.1f} s'
+                     + (', each moved there by Eq 18)' if corrected else
+                        "; NOT corrected for the sun's motion: no ephemeris)"))
+        outliers = (f'; {len(result.outliers)} left out: ' + '; '.join(
+            f'observation at {buffered[i].seconds:.3f} s: {reason}'
+            for i, reason in result.outliers)) if result.outliers else ''
+        if not result.trustworthy:
+            response.message = (f'{method}: estimate not trustworthy {time_note}: '
+                                f'{result.reason or "not converged"}{outliers}')
+            self.get_logger().warning(response.message)
             return response
-        anchor = self._sun_now(stamp)
         if anchor is not None:
-            message.anchor_stamp = stamp.to_msg()
-            message.anchor_elevation = message.elevation = anchor.elevation
-            message.anchor_azimuth = message.azimuth = anchor.azimuth
-        self._estimate = (message, anchor)
-        self.estimate_publisher.publish(message)
-        sigma = np.degrees(np.sqrt(np.maximum(np.diag(result.covariance), 0.0)))
+            self._estimate = (message, anchor)
+        moved = self._moved(message, anchor, self.get_clock().now()) if anchor else None
+        self.estimate_publisher.publish(moved or message)
+        spread = np.degrees(np.sqrt(np.maximum(np.diag(result.covariance), 0.0)))
         response.message = (
             f'{method}: phi0 {math.degrees(result.phi0):.3f} deg, theta0 '
-            f'{math.degrees(result.theta0):.3f} deg (sigma {sigma[0]:.3f}, {sigma[1]:.3f} deg) '
-            f'from {result.observations} observations in {result.iterations} iterations'
-            + (f'; {result.reason}' if result.reason else ''))
+            f'{math.degrees(result.theta0):.3f} deg (sigma {spread[0]:.3f}, {spread[1]:.3f} deg) '
+            f'{time_note} from {result.observations} observations in {result.iterations} '
+            f'iterations; fit chi-square {result.chi2:.3g} <= {result.chi2_threshold:.3g} '
+            f'({result.dof} degrees of freedom){outliers}')
         self.get_logger().info(response.message)
         return response
 
-    def _message(self, result, stamp):
+    def _message(self, result, buffered, reference_stamp, anchor, corrected):
+        """Build the SunEstimate at the reference time (header.stamp = anchor_stamp)."""
         message = SunEstimate()
-        message.header.stamp = stamp.to_msg()
+        message.header.stamp = reference_stamp
         message.header.frame_id = 'robot'
-        if result.converged:
+        if np.all(np.isfinite(result.direction)):
             message.direction.x, message.direction.y, message.direction.z = (
                 float(v) for v in result.direction)
             message.phi0, message.theta0 = float(result.phi0), float(result.theta0)
-        message.covariance = [float(v) for v in np.asarray(result.covariance).ravel()]
+        message.covariance = _finite(result.covariance)
         message.method = result.method
         message.iterations = int(result.iterations)
         message.residual = float(result.residual) if math.isfinite(result.residual) else 0.0
         message.converged = bool(result.converged)
         message.reason = result.reason
         message.observations = int(result.observations)
+        message.anchor_stamp = reference_stamp
+        if anchor is not None:
+            message.anchor_elevation = message.elevation = anchor.elevation
+            message.anchor_azimuth = message.azimuth = anchor.azimuth
+        message.fit_chi2 = float(result.chi2) if math.isfinite(result.chi2) else 0.0
+        message.fit_dof = int(result.dof)
+        message.fit_threshold = float(result.chi2_threshold) \
+            if math.isfinite(result.chi2_threshold) else 0.0
+        message.observation_deviation = [float(v) for v in result.deviations]
+        message.observation_stamps = [buffered[i].stamp for i in result.inliers]
+        used = [buffered[i].seconds for i in result.inliers]
+        message.observation_span = float(max(used) - min(used)) if used else 0.0
+        message.ephemeris_corrected = bool(corrected)
+        message.outliers = len(result.outliers)
+        message.outlier_stamps = [buffered[i].stamp for i, _ in result.outliers]
+        message.outlier_reasons = [reason for _, reason in result.outliers]
+        message.ambiguous = bool(result.ambiguous)
+        if result.alternatives:
+            best = result.alternatives[0]
+            message.alternative_direction.x, message.alternative_direction.y, \
+                message.alternative_direction.z = (float(v) for v in best.direction)
+            message.alternative_chi2 = float(best.chi2)
+            message.alternative_separation = float(best.separation)
+            message.alternative_covariance = _finite(best.covariance)
         return message
 
-    def _sun_now(self, stamp):
+    def _sun_at(self, stamp_ns):
         try:
-            return sun_position(self.site, stamp_to_datetime(stamp.nanoseconds))
-        except (ValueError, OverflowError) as error:
-            self.get_logger().warning(f'ephemeris unavailable: {error}')
+            return sun_position(self.site, stamp_to_datetime(stamp_ns))
+        except (ValueError, OverflowError, TypeError) as error:
+            self.get_logger().warning(f'ephemeris unavailable: {error}',
+                                      throttle_duration_sec=10.0)
             return None
 
-    def _on_timer(self):
-        """Eq 18: move the published estimate along with the sun."""
-        if self._estimate is None or self._estimate[1] is None:
-            return
-        anchor_message, anchor = self._estimate
-        stamp = self.get_clock().now()
-        now = self._sun_now(stamp)
+    def _moved(self, anchor_message, anchor, stamp):
+        """Eq 18: the estimate moved from its anchor to `stamp` (rclpy Time)."""
+        now = self._sun_at(stamp.nanoseconds)
         if now is None:
-            return
+            return None
         phi, theta = corrected_angles(anchor_message.phi0, anchor_message.theta0, anchor, now)
-        message = SunEstimate()
-        for field in SunEstimate.get_fields_and_field_types():
-            setattr(message, field, getattr(anchor_message, field))
+        message = copy.deepcopy(anchor_message)   # its header is not the anchor's
         message.header.stamp = stamp.to_msg()
         message.phi0, message.theta0 = float(phi), float(theta)
         direction = direction_from_angles(phi, theta)
         message.direction.x, message.direction.y, message.direction.z = (
             float(v) for v in direction)
         message.elevation, message.azimuth = now.elevation, now.azimuth
-        self.estimate_publisher.publish(message)
+        return message
+
+    def _on_timer(self):
+        """Eq 18: move the published estimate along with the sun."""
+        if self._estimate is None:
+            return
+        message = self._moved(*self._estimate, self.get_clock().now())
+        if message is not None:
+            self.estimate_publisher.publish(message)
+
+
+def _finite(matrix):
+    """Return a 2x2 matrix as 4 floats, non-finite values as 0 (the message's 'unknown')."""
+    values = np.asarray(matrix, dtype=float).ravel()
+    return [float(v) if math.isfinite(v) else 0.0 for v in values]
 
 
 def main(args=None):

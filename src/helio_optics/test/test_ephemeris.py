@@ -11,8 +11,8 @@ import pytest
 
 # NREL SPA (Reda & Andreas 2004) test case: 17 Oct 2003 12:30:30 local time (UTC-7),
 # Golden CO; apparent zenith 50.11162 deg, azimuth 194.34024 deg.
-SPA_SITE = Site(latitude_deg=39.742476, longitude_deg=-105.1786, elevation_m=1830.14,
-                temperature_c=11.0, pressure_pa=82000.0)
+SPA_SITE = Site(latitude_deg=39.742476, longitude_deg=-105.1786, elevation=1830.14,
+                temperature=11.0, pressure=82000.0)
 SPA_TIME = datetime.datetime(2003, 10, 17, 12, 30, 30,
                              tzinfo=datetime.timezone(datetime.timedelta(hours=-7)))
 
@@ -53,3 +53,18 @@ def test_ray_points_down_and_away_from_the_sun():
     ray = direction_from_angles(phi0, theta0)
     np.testing.assert_allclose(ray, [math.cos(math.radians(40)), 0.0,
                                      -math.sin(math.radians(40))], atol=1e-12)
+
+
+def test_angle_offsets_are_eq18_differences_wrapped_across_north():
+    from helio_optics.ephemeris import angle_offsets, SunPosition
+    before = SunPosition(math.radians(30.0), math.radians(359.5))
+    after = SunPosition(math.radians(30.2), math.radians(0.5))     # one degree later, past N
+    dphi, dtheta = angle_offsets(before, after)
+    assert dphi == pytest.approx(math.radians(0.2), abs=1e-12)
+    assert dtheta == pytest.approx(math.radians(-1.0), abs=1e-12)  # not +359 deg
+    # the offsets move ray angles exactly as the direct ray angles at the later time
+    heading = math.radians(12.0)
+    phi0, theta0 = ray_angles_from_sun(before, heading)
+    direct = ray_angles_from_sun(after, heading)
+    np.testing.assert_allclose(direction_from_angles(phi0 + dphi, theta0 + dtheta),
+                               direction_from_angles(*direct), atol=1e-12)

@@ -10,7 +10,7 @@ from helio_optics.rig_kinematics import UnreachableError
 import numpy as np
 import pytest
 
-CONFIG = os.path.join(os.path.dirname(__file__), '..', 'config', 'rig.yaml')
+CONFIG = os.path.join(os.path.dirname(__file__), '..', '..', '..', 'config', 'rig.yaml')
 
 
 def reachable_joint_grid(rig):
@@ -118,3 +118,34 @@ def test_default_rig_file_is_the_package_config():
     path = default_rig_file()
     assert path is not None and path.endswith('rig.yaml')
     assert load_rig_parameters(path) == load_rig_parameters(CONFIG)
+
+
+@pytest.mark.parametrize('call,name', [
+    (lambda rig: rig.inverse([np.nan, 0.0, 0.1], 0.0, 0.3), 'lens position'),
+    (lambda rig: rig.inverse([0.2, 0.0, 0.1], float('nan'), 0.3), 'lens yaw'),
+    (lambda rig: rig.inverse([0.2, 0.0, 0.1], 0.0, float('inf')), 'lens pitch'),
+    (lambda rig: rig.lens_pose_for_target([0.2, np.nan, -0.1], [0.3, 0.1, -0.9], 0.082),
+     'target'),
+    (lambda rig: rig.lens_pose_for_target([0.2, 0.0, -0.1], [np.nan, 0.1, -0.9], 0.082),
+     'sun_direction'),
+    (lambda rig: rig.lens_pose_for_target([0.2, 0.0, -0.1], [0.3, 0.1, -0.9], float('nan')),
+     'd_lp'),
+    (lambda rig: rig.lens_pose_for_target([0.2, 0.0, -0.1], [0.3, 0.1, -0.9], 0.082,
+                                          preferred_yaw=float('nan')), 'preferred_yaw'),
+    (lambda rig: rig.yaw_pitch_for_axis([0.1, np.nan, 0.9]), 'lens axis'),
+    (lambda rig: rig.yaw_pitch_for_axis([0.1, 0.2, 0.9], preferred_yaw=float('nan')),
+     'preferred_yaw'),
+])
+def test_non_finite_inputs_are_named_instead_of_giving_nan_joints(call, name):
+    with pytest.raises(ValueError, match=name):
+        call(Rig())
+
+
+def test_finite_inputs_near_the_checks_still_reach_their_joints():
+    rig = Rig()
+    target = transform_points(rig.parameters.T_robot_world, [0.05, 0.05, 0.0])
+    sun = -direction_from_angles(math.radians(40.0), math.radians(200.0))
+    pose = rig.lens_pose_for_target(target, sun, 0.082)
+    assert pose.x is not None and np.all(np.isfinite(pose.x)), pose.reason
+    np.testing.assert_allclose(rig.forward(pose.x).T_robot_lens[:3, 3], target - 0.082 * sun,
+                               atol=1e-9)

@@ -1,22 +1,29 @@
-"""The sun_estimator node in-process (private Context): spots in, /estimate_sun answered."""
+"""
+The sun_estimator node in the kit's InProcessGraph: spots in, estimate_sun answered.
 
+The joint states arrive as the real drivers send them: the arm's four joints and the wrist's
+two in separate messages, each stamped on its own clock. The spots are the model's own for a
+known sun (the truth), put on the ground in the world frame as spot_detector sends them.
+"""
+
+import datetime
 import math
 import os
-import time
 
 from helio_msgs.msg import SpotObservation, SunEstimate
 from helio_msgs.srv import EstimateSun
+from helio_optics.ephemeris import ray_angles_from_sun, sun_position
 from helio_optics.geometry import direction_from_angles, invert_transform, transform_points
-from helio_optics.rig_kinematics import JOINT_NAMES, Rig, UnreachableError
+from helio_optics.node_kit.conversions import stamp_from_seconds, stamp_to_seconds
+from helio_optics.node_kit.in_process_graph import InProcessGraph, TRANSIENT_LOCAL_QOS
+from helio_optics.node_kit.in_process_graph import wait_for_future
+from helio_optics.rig_kinematics import Rig, UnreachableError
 from helio_optics.sun_estimator_node import SunEstimatorNode
 import numpy as np
 import pytest
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 import yaml
 
@@ -25,43 +32,30 @@ CONFIG = os.path.join(os.path.dirname(__file__), '..', 'config', 'sun_estimator.
 # The documented range of every numeric parameter (README, config/sun_estimator.yaml units):
 # what the node declared before and must keep declaring. Ints get integer ranges.
 RANGES = {
-    'lens.focal_length': (0.01, 1.0), 'lens.refractive_index': (1.01, 3.0),
-    'lens.thickness': (0.0, 0.02), 'lens.aperture_diameter': (0.001, 1.0),
-    'lens.transmission': (0.01, 1.0), 'rim_points': (8, 4096), 'contour_fraction': (0.05, 1.0),
+    'rim_points': (8, 4096), 'contour_fraction': (0.05, 1.0),
     'centre_sigma': (1e-6, 0.05), 'max_observations': (1, 10000),
     'max_observation_age': (0.1, 1e6), 'joint_state_tolerance': (0.0, 10.0),
     'gain': (0.01, 2.0), 'delta': (1e-9, 0.1), 'tolerance': (1e-15, 1.0),
-    'max_iterations': (1, 10000), 'site.latitude_deg': (-90.0, 90.0),
-    'site.longitude_deg': (-180.0, 360.0), 'site.elevation_m': (-500.0, 9000.0),
-    'site.temperature_c': (-60.0, 60.0), 'site.pressure_pa': (3e4, 1.2e5),
-    'update_period': (0.0, 3600.0)}
-
-
-def spin_until(executor, condition, timeout=10.0):
-    """Spin until `condition()` holds; fail after `timeout` seconds of waiting."""
-    deadline = time.monotonic() + timeout
-    while not condition():
-        assert time.monotonic() < deadline, 'timed out waiting'
-        executor.spin_once(timeout_sec=0.05)
+    'max_iterations': (1, 10000), 'update_period': (0.0, 3600.0),
+    'fit_alpha': (1e-12, 0.5), 'outlier_alpha': (1e-15, 0.5),
+    'max_outlier_fraction': (0.01, 1.0), 'step_tolerance': (1e-6, 1.0),
+    'ambiguity_chi2': (0.01, 1000.0), 'ambiguity_separation_deg': (1e-4, 10.0),
+    'plane_tolerance': (1e-6, 1.0), 'min_chief_ray_elevation_deg': (0.0, 80.0)}
+# Read each time an estimate is made: may change while the node runs. Every other parameter
+# is read at start-up and declared read-only.
+DYNAMIC = {'method', 'centre_sigma', 'max_observations', 'max_observation_age',
+           'joint_state_tolerance', 'gain', 'delta', 'tolerance', 'max_iterations',
+           'fit_alpha', 'outlier_alpha', 'max_outlier_fraction', 'step_tolerance',
+           'ambiguity_chi2', 'ambiguity_separation_deg', 'plane_tolerance',
+           'min_chief_ray_elevation_deg'}
 
 
 @pytest.fixture
 def graph():
-    context = Context()
-    rclpy.init(context=context)
-    node = SunEstimatorNode(context=context, parameter_overrides=[
-        Parameter('update_period', value=0.2)])
-    helper = rclpy.create_node('sun_estimator_test_helper', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    executor.add_node(helper)
-    try:
-        yield node, helper, executor
-    finally:
-        executor.shutdown()
-        helper.destroy_node()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
+    """Yield (node, InProcessGraph) with the Eq 18 update every 0.2 s."""
+    with InProcessGraph('sun_estimator_test_helper') as in_process:
+        node = in_process.add(SunEstimatorNode(**in_process.node_options(update_period=0.2)))
+        yield node, in_process
 
 
 def flatten(tree, prefix=''):
@@ -75,25 +69,24 @@ def flatten(tree, prefix=''):
     return flat
 
 
-def wait_for(executor, future, timeout=10.0):
-    """Spin until `future` is done and return its result; fail after `timeout` seconds."""
-    executor.spin_until_future_complete(future, timeout_sec=timeout)
-    assert future.done(), 'timed out waiting for a parameter service'
-    return future.result()
+def wait_for(future, timeout=10.0):
+    """Wait for a future spun by the graph's thread; return its result."""
+    return wait_for_future(future, timeout, 'a parameter service')
 
 
 def test_parameters_are_described_with_ranges_that_refuse_values_outside(graph):
-    node, helper, executor = graph
+    node, in_process = graph
     with open(CONFIG) as stream:
         shipped = flatten(yaml.safe_load(stream)['/**']['ros__parameters'])
     assert set(RANGES) < set(shipped)
-    client = AsyncParameterClient(helper, 'sun_estimator')
-    spin_until(executor, client.services_are_ready)
+    client = AsyncParameterClient(in_process.helper, 'sun_estimator')
+    in_process.wait_until(client.services_are_ready, what='the parameter services')
     names = sorted(shipped)
-    descriptors = wait_for(executor, client.describe_parameters(names)).descriptors
-    values = wait_for(executor, client.get_parameters(names)).values
+    descriptors = wait_for(client.describe_parameters(names)).descriptors
+    values = wait_for(client.get_parameters(names)).values
     for name, descriptor, value in zip(names, descriptors, values):
         assert descriptor.name == name and descriptor.description, name
+        assert descriptor.read_only == (name not in DYNAMIC), name
         if name != 'update_period':  # overridden by the fixture
             assert parameter_value_to_python(value) == shipped[name], name
         if name not in RANGES:
@@ -108,29 +101,36 @@ def test_parameters_are_described_with_ranges_that_refuse_values_outside(graph):
             (span,) = descriptor.floating_point_range
             assert (span.from_value, span.to_value) == pytest.approx((low, high)), name
 
-    outside = [Parameter('rim_points', value=4097), Parameter('max_observations', value=0),
-               Parameter('site.latitude_deg', value=90.5), Parameter('gain', value=2.5),
+    outside = [Parameter('max_observations', value=0), Parameter('gain', value=2.5),
                Parameter('centre_sigma', value=0.0)]
-    results = wait_for(executor, client.set_parameters(outside)).results
+    results = wait_for(client.set_parameters(outside)).results
     assert [result.successful for result in results] == [False] * len(outside)
     assert all(result.reason for result in results)
+    # a parameter read only at start-up refuses a change, even within its range
+    (refused,) = wait_for(client.set_parameters([Parameter('rim_points', value=32)])).results
+    assert not refused.successful and 'read-only' in refused.reason.lower()
     assert node.get_parameter('rim_points').value == 64
-    assert node.get_parameter('site.latitude_deg').value == shipped['site.latitude_deg']
     inside = [Parameter('max_observations', value=10000), Parameter('gain', value=2.0)]
-    results = wait_for(executor, client.set_parameters(inside)).results
+    results = wait_for(client.set_parameters(inside)).results
     assert all(result.successful for result in results)
     assert node.get_parameter('max_observations').value == 10000
 
 
-def sweep_joints(rig):
+def test_a_start_up_value_outside_its_range_stops_the_node_with_the_reason():
+    with InProcessGraph() as in_process:
+        with pytest.raises(Exception, match='rim_points'):
+            SunEstimatorNode(**in_process.node_options(rim_points=4097))
+
+
+def sweep_joints(rig, sun=SUN, offsets_deg=(-10.0, -5.0, 0.0, 5.0, 10.0), tilt_deg=14.0):
     """Joints of a lens yaw sweep viewing a clear spot near the canvas centre."""
     target = transform_points(rig.parameters.T_robot_world, [0.1, 0.1, 0.0])
-    centre = target - 0.06 * SUN
-    elevation = math.asin(-SUN[2])
-    azimuth = math.atan2(-SUN[1], -SUN[0])
-    axis = direction_from_angles(0.5 * math.pi - elevation - math.radians(14.0), azimuth)
+    centre = target - 0.06 * sun
+    elevation = math.asin(-sun[2])
+    azimuth = math.atan2(-sun[1], -sun[0])
+    axis = direction_from_angles(0.5 * math.pi - elevation - math.radians(tilt_deg), azimuth)
     joints = []
-    for offset in np.radians([-10.0, -5.0, 0.0, 5.0, 10.0]):
+    for offset in np.radians(offsets_deg):
         yaw, pitch = rig.yaw_pitch_for_axis(axis)
         try:
             joints.append(rig.inverse(centre, yaw + offset, pitch))
@@ -140,56 +140,186 @@ def sweep_joints(rig):
     return joints
 
 
-def test_service_estimates_the_sun_and_publishes_it_transient_local(graph):
-    node, helper, executor = graph
-    rig = Rig()
-    joint_publisher = helper.create_publisher(JointState, '/joint_states', 50)
-    spot_publisher = helper.create_publisher(SpotObservation, '/spot', 20)
-    spin_until(executor, lambda: node.count_publishers('/spot') >= 1
-               and joint_publisher.get_subscription_count() >= 1
-               and spot_publisher.get_subscription_count() >= 1)
-    T_world_robot = invert_transform(rig.parameters.T_robot_world)
-    # A malformed (invalid) spot first: logged and skipped.
-    spot_publisher.publish(SpotObservation(valid=False, reason='no spot'))
-    for k, x in enumerate(sweep_joints(rig)):
-        stamp = helper.get_clock().now().to_msg()
-        joint_state = JointState(name=list(JOINT_NAMES), position=[float(v) for v in x])
-        joint_state.header.stamp = stamp
-        joint_publisher.publish(joint_state)
-        truth = node.estimator.synthetic_observation(
-            SUN, rig.forward(x).T_robot_lens, rig.parameters.T_robot_world[:3, 3],
-            rig.parameters.T_robot_world[:3, 2])
-        centre_world = transform_points(T_world_robot, truth.centre)
-        spot = SpotObservation(valid=True)
+class Rigged:
+    """The test's side: joint-state and spot publishers, and spots made for a known sun."""
+
+    def __init__(self, node, in_process):
+        self.node, self.graph, self.rig = node, in_process, Rig()
+        helper = in_process.helper
+        self.joints = helper.create_publisher(JointState, 'joint_states', 50)
+        self.spots = helper.create_publisher(SpotObservation, 'spot', 20)
+        self.client = helper.create_client(EstimateSun, 'estimate_sun')
+        in_process.wait_until(lambda: self.joints.get_subscription_count() >= 1
+                              and self.spots.get_subscription_count() >= 1,
+                              what='the node subscribing')
+
+    def observe(self, x, seconds, sun, shift=(0.0, 0.0, 0.0), quality=SpotObservation.FULL):
+        """Publish the joints x and the spot `sun` casts, both stamped `seconds` [s]."""
+        stamp = stamp_from_seconds(seconds)
+        seconds = stamp_to_seconds(stamp)     # what the node reads from the header
+        # as the drivers publish them: the arm (with the unused end servo), then the wrist
+        arm = JointState(name=['dobot_j1', 'dobot_j2', 'dobot_j3', 'dobot_j4'],
+                         position=[float(v) for v in x[:3]] + [0.0])
+        wrist = JointState(name=['lens_yaw', 'lens_pitch'], position=[float(v) for v in x[3:]])
+        arm.header.stamp = wrist.header.stamp = stamp
+        self.joints.publish(arm)
+        self.joints.publish(wrist)
+        T_robot_world = self.rig.parameters.T_robot_world
+        truth = self.node.estimator.synthetic_observation(
+            sun, self.rig.forward(x).T_robot_lens, T_robot_world[:3, 3], T_robot_world[:3, 2])
+        centre_world = transform_points(invert_transform(T_robot_world), truth.centre) + shift
+        spot = SpotObservation(valid=True, quality=quality)
         spot.header.stamp = stamp
         spot.header.frame_id = 'world'
         spot.center.x, spot.center.y, spot.center.z = (float(v) for v in centre_world)
-        spin_until(executor, lambda: len(node._joint_stamps) > k)
-        spot_publisher.publish(spot)
-        spin_until(executor, lambda: len(node._observations) > k)
+        self.graph.wait_until(lambda: self.node.joints.at(seconds, 0.0),
+                              what=f'both joint-state parts at {seconds} s')
+        count = len(self.node._observations)
+        self.spots.publish(spot)
+        return stamp, count
 
-    client = helper.create_client(EstimateSun, '/estimate_sun')
-    assert client.wait_for_service(timeout_sec=5.0)
+    def recorded(self, count):
+        """Wait until the node holds more than `count` observations."""
+        self.graph.wait_until(lambda: len(self.node._observations) > count,
+                              what=f'observation {count} recorded')
+
+    def estimate(self, method='', timeout=30.0):
+        """Call estimate_sun; return the response."""
+        return self.graph.call(self.client, EstimateSun.Request(method=method), timeout=timeout)
+
+
+def vector(message):
+    """Return a geometry_msgs/Vector3 as an array."""
+    return np.array([message.x, message.y, message.z])
+
+
+def angle_deg(a, b):
+    """Return the angle between two unit vectors [deg]."""
+    return math.degrees(math.acos(min(1.0, max(-1.0, float(np.dot(a, b))))))
+
+
+def test_service_estimates_the_sun_from_partial_joint_states_and_publishes_it(graph):
+    node, in_process = graph
+    rigged = Rigged(node, in_process)
+    # A malformed (invalid) spot first: logged and skipped.
+    rigged.spots.publish(SpotObservation(valid=False, reason='no spot'))
+    start = in_process.helper.get_clock().now().nanoseconds * 1e-9
+    for k, x in enumerate(sweep_joints(rigged.rig)):
+        rigged.recorded(rigged.observe(x, start + 0.25 * k, SUN)[1])
+
     for method in ('levenberg_marquardt', 'interaction_matrix'):
-        future = client.call_async(EstimateSun.Request(method=method))
-        executor.spin_until_future_complete(future, timeout_sec=20.0)
-        response = future.result()
-        assert response is not None and response.success, response.message
-        direction = np.array([response.estimate.direction.x, response.estimate.direction.y,
-                              response.estimate.direction.z])
-        assert math.degrees(math.acos(min(1.0, direction @ SUN))) < 0.01
+        response = rigged.estimate(method)
+        assert response.success, response.message
+        assert angle_deg(vector(response.estimate.direction), SUN) < 0.01
         assert response.estimate.method == method and response.estimate.observations >= 3
+        assert response.estimate.converged and not response.estimate.ambiguous
+        assert response.estimate.fit_chi2 <= response.estimate.fit_threshold
+        assert len(response.estimate.observation_stamps) == response.estimate.observations
+        assert len(response.estimate.observation_deviation) == response.estimate.observations
 
-    future = client.call_async(EstimateSun.Request(method='guess'))
-    executor.spin_until_future_complete(future, timeout_sec=5.0)
-    assert not future.result().success and 'unknown method' in future.result().message
+    response = rigged.estimate('guess')
+    assert not response.success and 'unknown method' in response.message
 
     # A late subscriber still gets the estimate (transient local), then the Eq 18 updates.
-    received = []
-    helper.create_subscription(
-        SunEstimate, '/sun/estimate', received.append,
-        QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE,
-                   durability=DurabilityPolicy.TRANSIENT_LOCAL))
-    spin_until(executor, lambda: len(received) >= 2)
-    assert received[0].converged and received[0].header.frame_id == 'robot'
-    assert received[-1].anchor_stamp == received[0].anchor_stamp
+    received = in_process.collect(SunEstimate, 'sun/estimate', TRANSIENT_LOCAL_QOS)
+    messages = received.wait_for_count(2)
+    assert messages[0].converged and messages[0].header.frame_id == 'robot'
+    assert messages[-1].anchor_stamp == messages[0].anchor_stamp
+
+
+def test_an_outlier_is_named_by_its_stamp_and_an_untrustworthy_estimate_is_not_published(graph):
+    node, in_process = graph
+    rigged = Rigged(node, in_process)
+    estimates = in_process.collect(SunEstimate, 'sun/estimate', TRANSIENT_LOCAL_QOS)
+    start = in_process.helper.get_clock().now().nanoseconds * 1e-9
+    joints = sweep_joints(rigged.rig, offsets_deg=np.arange(-10.0, 11.0, 2.5))
+    # Every spot 1 cm off alternately: no sun fits, nothing may be published.
+    for k, x in enumerate(joints):
+        rigged.recorded(rigged.observe(x, start + 0.25 * k, SUN,
+                                       shift=(0.0, 0.01 * (-1) ** k, 0.0))[1])
+    response = rigged.estimate()
+    assert not response.success
+    assert 'not trustworthy' in response.message and 'chi-square' in response.message
+    assert not response.estimate.converged and response.estimate.reason
+    assert response.estimate.fit_chi2 > response.estimate.fit_threshold
+    # The same sweep again, right, with one spot 3 cm off: it is left out and named.
+    start += 10.0
+    stamps = []
+    for k, x in enumerate(joints):
+        stamp, count = rigged.observe(x, start + 0.25 * k, SUN,
+                                      shift=(0.03, 0.0, 0.0) if k == 4 else (0.0, 0.0, 0.0))
+        rigged.recorded(count)
+        stamps.append(stamp)
+    wild = stamps[4]
+    response = in_process.call(rigged.client, EstimateSun.Request(
+        max_observations=len(joints)), timeout=30.0)
+    assert response.success, response.message
+    assert response.estimate.outliers == 1 and list(response.estimate.outlier_stamps) == [wild]
+    assert 'standard deviations' in response.estimate.outlier_reasons[0]
+    assert 'left out' in response.message
+    assert wild not in list(response.estimate.observation_stamps)
+    assert angle_deg(vector(response.estimate.direction), SUN) < 0.05
+    # The first thing ever published on sun/estimate is the trustworthy one.
+    first = estimates.wait_for_count(1)[0]
+    assert first.converged and first.outliers == 1 and first.anchor_stamp == \
+        response.estimate.anchor_stamp
+
+
+def test_a_sweep_over_ten_minutes_gives_the_ephemeris_sun_at_its_middle():
+    """
+    Spots over ten minutes of simulated time while the sun moves (pysolar at the site).
+
+    The truth is the ephemeris: at each image stamp the sun the world would have, seen from
+    a robot whose x axis points 160 deg east of north. The node moves each observation to
+    the middle of the sweep by Eq 18; its estimate must be the sun then, and what it
+    publishes the sun at the time of publication.
+    """
+    start = datetime.datetime(2026, 6, 21, 9, 0, tzinfo=datetime.timezone.utc).timestamp()
+    heading = math.radians(160.0)
+    with InProcessGraph('sun_estimator_time_helper') as in_process:
+        node = in_process.add(SunEstimatorNode(**in_process.node_options(
+            use_sim_time=True, update_period=0.0, max_observation_age=3600.0)))
+        clock = in_process.helper.create_publisher(Clock, '/clock', 10)
+
+        def sun_at(seconds):
+            position = sun_position(node.site, datetime.datetime.fromtimestamp(
+                seconds, tz=datetime.timezone.utc))
+            return direction_from_angles(*ray_angles_from_sun(position, heading))
+
+        rigged = Rigged(node, in_process)
+        times = start + np.linspace(0.0, 600.0, 11)
+        assert angle_deg(sun_at(times[0]), sun_at(times[-1])) > 1.5     # the sun moved
+        joints = sweep_joints(rigged.rig, sun_at(times[5]),
+                              offsets_deg=np.linspace(-12.0, 12.0, 11))
+        for seconds, x in zip(times, joints):
+            rigged.recorded(rigged.observe(x, seconds, sun_at(seconds))[1])
+        end = times[-1] + 1.0
+        clock.publish(Clock(clock=stamp_from_seconds(end)))
+        in_process.wait_until(lambda: node.get_clock().now().nanoseconds * 1e-9 >= end - 1e-6,
+                              what='the node on simulated time')
+        estimates = in_process.collect(SunEstimate, 'sun/estimate', TRANSIENT_LOCAL_QOS)
+        response = rigged.estimate()
+        assert response.success, response.message
+        estimate = response.estimate
+        middle = 0.5 * (times[0] + times[-1])
+        assert stamp_to_seconds(estimate.anchor_stamp) == pytest.approx(middle, abs=1e-6)
+        assert estimate.header.stamp == estimate.anchor_stamp
+        # noise-free spots: the corrected fit is exact; taken as one fixed sun the same spots
+        # give their mean direction, 0.012 deg off
+        assert angle_deg(vector(estimate.direction), sun_at(middle)) < 0.001
+        assert estimate.ephemeris_corrected and estimate.observation_span == pytest.approx(600.0)
+        assert '2026-06-21T09:05:00' in response.message and 'Eq 18' in response.message
+        published = estimates.wait_for_count(1)[0]
+        assert stamp_to_seconds(published.header.stamp) == pytest.approx(end, abs=1e-3)
+        assert angle_deg(vector(published.direction), sun_at(end)) < 0.01
+
+
+def test_only_full_spots_are_used(graph):
+    node, in_process = graph
+    rigged = Rigged(node, in_process)
+    start = in_process.helper.get_clock().now().nanoseconds * 1e-9
+    x = sweep_joints(rigged.rig)[0]
+    # a spot cut by the image border is not used; the next, full one is
+    rigged.observe(x, start, SUN, quality=SpotObservation.CUT_BY_BORDER)
+    rigged.recorded(rigged.observe(x, start + 0.1, SUN)[1])
+    assert [b.seconds for b in node._observations] == [pytest.approx(start + 0.1)]

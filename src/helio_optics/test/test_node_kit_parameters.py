@@ -1,6 +1,7 @@
-"""helio_optics.node_parameters on a real rclpy node (private Context): ranges rclpy enforces."""
+"""The kit's parameter declaration on a real rclpy node (private Context): ranges, read-only."""
 
-from helio_optics.node_parameters import declare, parameter_descriptor
+from helio_optics.node_kit.parameters import declare, parameter_descriptor
+from helio_optics.node_kit.parameters import unit_naming_problem
 import pytest
 import rclpy
 from rclpy.context import Context
@@ -30,7 +31,7 @@ def make_node():
 
 def test_float_range_is_in_the_descriptor_and_enforced(make_node):
     node = make_node()
-    assert declare(node, 'gain', 0.9, 'a gain [-]', 0.01, 2.0) == 0.9
+    assert declare(node, 'gain', 0.9, 'a gain [-]', 0.01, 2.0, dynamic=True) == 0.9
     descriptor = node.describe_parameter('gain')
     assert descriptor.description == 'a gain [-]'
     assert not descriptor.integer_range
@@ -45,7 +46,7 @@ def test_float_range_is_in_the_descriptor_and_enforced(make_node):
 
 def test_integer_range_from_an_int_default_steps_by_one(make_node):
     node = make_node()
-    assert declare(node, 'rim_points', 64, 'rays [-]', 8, 4096) == 64
+    assert declare(node, 'rim_points', 64, 'rays [-]', 8, 4096, dynamic=True) == 64
     (span,) = node.describe_parameter('rim_points').integer_range
     assert (span.from_value, span.to_value, span.step) == (8, 4096, 1)
     assert not node.describe_parameter('rim_points').floating_point_range
@@ -75,9 +76,9 @@ def test_an_override_inside_the_range_is_returned(make_node):
 
 def test_no_range_without_bounds(make_node):
     node = make_node()
-    assert declare(node, 'rig_config', '', 'rig YAML') == ''
-    assert declare(node, 'period', 5.0, 'period [s]') == 5.0
-    for name in ('rig_config', 'period'):
+    assert declare(node, 'rig_file', '', 'rig YAML') == ''
+    assert declare(node, 'period', 5.0, 'period [s]', dynamic=True) == 5.0
+    for name in ('rig_file', 'period'):
         descriptor = node.describe_parameter(name)
         assert not descriptor.floating_point_range and not descriptor.integer_range
     assert node.set_parameters([Parameter('period', value=1e9)])[0].successful
@@ -114,3 +115,38 @@ def test_a_bad_range_declares_nothing(make_node):
     with pytest.raises(ValueError):
         declare(node, 'gain', 0.9, 'a gain [-]', 2.0, 0.01)
     assert not node.has_parameter('gain')
+
+
+def test_a_start_up_parameter_is_read_only_and_a_dynamic_one_is_not(make_node):
+    node = make_node([Parameter('rate', value=10.0)])
+    assert declare(node, 'rate', 20.0, 'poll rate [Hz]', 0.1, 100.0) == 10.0
+    assert declare(node, 'gain', 0.9, 'a gain [-]', 0.01, 2.0, dynamic=True) == 0.9
+    assert node.describe_parameter('rate').read_only
+    assert not node.describe_parameter('gain').read_only
+    refused = node.set_parameters([Parameter('rate', value=50.0)])[0]
+    assert not refused.successful and 'read-only' in refused.reason.lower()
+    assert node.get_parameter('rate').value == 10.0
+    assert node.set_parameters([Parameter('gain', value=1.0)])[0].successful
+
+
+@pytest.mark.parametrize('name, problem', [
+    ('timeout_s', "use 'timeout'"), ('joint_state_rate_hz', "use 'joint_state_rate'"),
+    ('site.elevation_m', "use 'site.elevation'"), ('lens.offset_rad', "use 'lens.offset'"),
+    ('site.pressure_pa', 'SI unit'), ('temperature_c', 'SI unit')])
+def test_si_units_in_names_break_the_naming_rule(make_node, name, problem):
+    assert problem in unit_naming_problem(name)
+    with pytest.raises(ValueError, match='SI units are not named'):
+        declare(make_node(), name, 1.0, 'a quantity')
+
+
+@pytest.mark.parametrize('name', ['timeout', 'latitude_deg', 'min_pulse_us', 'speed_us_per_s',
+                                  'velocity_ratio_percent', 'xyz_velocity_mmps', 'dni',
+                                  'marker.side', 'rgb.supersample', 'status'])
+def test_names_without_a_unit_or_with_a_non_si_unit_follow_the_rule(name):
+    assert unit_naming_problem(name) == ''
+
+
+def test_an_empty_list_default_is_a_list_of_floats(make_node):
+    node = make_node([Parameter('cloud_schedule', value=[1.0, 2.0, 0.5])])
+    assert declare(node, 'cloud_schedule', [], 'start, end, factor triples') == [1.0, 2.0, 0.5]
+    assert declare(make_node(), 'cloud_schedule', [], 'start, end, factor triples') == []

@@ -10,7 +10,9 @@ def run_node(node_class, args=None):
 
     The pattern of the ros2/examples nodes, written once: a node that fails in its constructor
     (a bad parameter) raises after rclpy is shut down again, so the process exits non-zero
-    with the node's message.
+    with the node's message. A Ctrl-C or SIGTERM that arrives while the node is still being
+    constructed shuts the context down under it (its next create_* call fails): that is a
+    normal stop, not an error. rclpy is shut down even when destroy_node() raises.
     """
     rclpy.init(args=args)
     node = None
@@ -19,7 +21,12 @@ def run_node(node_class, args=None):
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if rclpy.ok():
+            raise           # a real error (the context is still up)
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        try:
+            if node is not None:
+                node.destroy_node()
+        finally:
+            rclpy.try_shutdown()

@@ -1,0 +1,88 @@
+"""
+Waiting inside a coroutine callback (an async action execute callback) without blocking.
+
+A node whose actions wait on other actions, services, topics or time writes its procedures
+as coroutines awaiting rclpy Futures; the executor runs other callbacks meanwhile, so the
+node works in a plain ``rclpy.spin`` (one thread; helio_drivers' DeviceActionNode explains
+why the MultiThreadedExecutor of rclpy 7.1.6 is avoided). These helpers make the waits:
+
+- ``await sleep(node, seconds, wall=False)``: node-clock time (simulated under
+  ``use_sim_time``), or steady wall time;
+- ``await within(node, future, seconds)``: True when `future` is done in time;
+- ``await discovered(node, ready, timeout, what)``: a server found by discovery, which has
+  no event to wait on (looked at every 50 ms), bounded by wall time so a stopped /clock
+  cannot hold it; raises TimeoutError naming `what`.
+- ``await clock_running(node)``: the node's clock has started (the node-clock waits above
+  wait for it first);
+- ``FirstOf``: one Future that any callback may complete (the first result wins).
+"""
+
+import time
+
+from rclpy.clock import Clock, ClockType
+from rclpy.task import Future
+
+
+class FirstOf(Future):
+    """A Future that ignores every result but the first."""
+
+    def offer(self, result):
+        """Complete with `result` unless already done; return whether this one counted."""
+        if self.done():
+            return False
+        self.set_result(result)
+        return True
+
+
+async def clock_running(node, timeout=60.0):
+    """
+    Wait until the node's clock runs (under ``use_sim_time``: the first /clock arrived).
+
+    Before that the clock reads 0, and the first /clock is a jump of years that fires every
+    timer at once: a wait timed before it would end at once.
+    """
+    deadline = time.monotonic() + timeout
+    while node.get_clock().now().nanoseconds == 0:
+        if time.monotonic() > deadline:
+            raise TimeoutError(f'the node clock did not start within {timeout:g} s (is /clock '
+                               'published?)')
+        await sleep(node, 0.05, wall=True)
+
+
+async def sleep(node, seconds, wall=False):
+    """Wait `seconds` of the node's clock (of the steady wall clock with `wall`)."""
+    if seconds <= 0.0:
+        return
+    if not wall:
+        await clock_running(node)
+    done = FirstOf()
+    clock = Clock(clock_type=ClockType.STEADY_TIME) if wall else None
+    timer = node.create_timer(seconds, lambda: done.offer(True), clock=clock)
+    try:
+        await done
+    finally:
+        node.destroy_timer(timer)
+
+
+async def within(node, future, seconds):
+    """Return whether `future` is done within `seconds` of the node's clock."""
+    if future.done():
+        return True
+    await clock_running(node)
+    waker = FirstOf()
+    future.add_done_callback(lambda _: waker.offer(True))
+    timer = node.create_timer(seconds, lambda: waker.offer(False))
+    try:
+        await waker
+    finally:
+        node.destroy_timer(timer)
+    return future.done()
+
+
+async def discovered(node, ready, timeout, what):
+    """Wait until `ready()` holds, at most `timeout` wall seconds; TimeoutError naming it."""
+    deadline = time.monotonic() + timeout
+    while not ready():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f'{what} is not available after {timeout:g} s')
+        await sleep(node, 0.05, wall=True)

@@ -1,0 +1,97 @@
+"""
+The deployment data a node needs, loaded the same way everywhere: one parameter per file.
+
+A node that needs the rig's kinematics (paper Sec. II-B: joints x, the lens, the cameras,
+T_robot_world) declares ``rig_file``; one that traces the lens declares ``lens_file``; one
+that needs the sun's ephemeris declares ``site_file``. Each is a ROS 2 parameter file with a
+``rig``, ``lens`` or ``site`` section; empty means the workspace's ``config/rig.yaml``,
+``config/lens.yaml`` or ``config/site.yaml`` (found by ``helio_optics.config_files``).
+"""
+
+import math
+
+from geometry_msgs.msg import PoseStamped
+from helio_optics.config_files import config_path
+from helio_optics.ephemeris import load_site
+from helio_optics.lens import load_lens_parameters
+from helio_optics.node_kit.conversions import pose_to_matrix
+from helio_optics.node_kit.parameters import declare
+from helio_optics.rig_kinematics import load_rig_parameters, Rig
+
+WORLD_CALIBRATION_TOPIC = 'calibration/world_pose'
+RIG_FILE_PARAMETER = 'rig_file'
+LENS_FILE_PARAMETER = 'lens_file'
+SITE_FILE_PARAMETER = 'site_file'
+
+
+def deployment_file_or_default(path, default_name, parameter):
+    """Return `path`, or config/`default_name` when empty; FileNotFoundError naming both."""
+    if path:
+        return path
+    try:
+        return config_path(default_name)
+    except FileNotFoundError as error:
+        raise FileNotFoundError(f'parameter {parameter} is empty and {error}') from None
+
+
+def rig_file_or_default(path):
+    """Return `path`, or the workspace's config/rig.yaml when empty."""
+    return deployment_file_or_default(path, 'rig.yaml', RIG_FILE_PARAMETER)
+
+
+def _declare_file(node, parameter, default_name, what):
+    return deployment_file_or_default(
+        declare(node, parameter, '',
+                f"{what} YAML (empty: the workspace's config/{default_name})."),
+        default_name, parameter)
+
+
+def declare_rig(node):
+    """Declare ``rig_file`` on `node`; return (Rig, the file it was read from)."""
+    path = _declare_file(node, RIG_FILE_PARAMETER, 'rig.yaml', "Rig geometry ('rig' section)")
+    return Rig(load_rig_parameters(path)), path
+
+
+def declare_lens(node):
+    """Declare ``lens_file`` on `node`; return (LensParameters, the file it was read from)."""
+    path = _declare_file(node, LENS_FILE_PARAMETER, 'lens.yaml',
+                         "Controller's lens model ('lens' section)")
+    return load_lens_parameters(path), path
+
+
+def declare_site(node):
+    """Declare ``site_file`` on `node`; return (Site, the file it was read from)."""
+    path = _declare_file(node, SITE_FILE_PARAMETER, 'site.yaml', "Site ('site' section)")
+    return load_site(path), path
+
+
+def follow_world_calibration(node, rig, on_update=None):
+    """
+    Keep `rig`'s T_robot_world on the robot-world calibration (``calibration/world_pose``).
+
+    The lens planner publishes the transform it measured from the ArUco marker (paper
+    Sec. II-B) with a transient-local QoS, so a node started later gets it too. A pose whose
+    z axis is not vertical within 5 deg is refused with a warning (the rig model holds the
+    panel level). `on_update(rig)` is called after each change. Return the subscription.
+    """
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    def apply(message):
+        transform = pose_to_matrix(message.pose)
+        tilt = math.degrees(math.acos(max(-1.0, min(1.0, transform[2, 2]))))
+        if message.header.frame_id not in ('', 'robot') or tilt > 5.0:
+            node.get_logger().warning(
+                f'{WORLD_CALIBRATION_TOPIC} ignored: frame {message.header.frame_id!r}, '
+                f'marker z {tilt:.1f} deg from vertical')
+            return
+        rig.set_world(transform[:3, 3], math.atan2(transform[1, 0], transform[0, 0]))
+        node.get_logger().info(
+            f'robot-world calibration applied: marker at '
+            f'{[round(v * 1000, 2) for v in transform[:3, 3]]} mm, yaw '
+            f'{math.degrees(rig.parameters.world_yaw):.3f} deg')
+        if on_update is not None:
+            on_update(rig)
+
+    qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    return node.create_subscription(PoseStamped, WORLD_CALIBRATION_TOPIC, apply, qos)

@@ -1,0 +1,166 @@
+"""
+One joint-state buffer for every node that needs the rig's joints (paper Sec. II-B: x in R^5).
+
+``/joint_states`` arrives in parts: ``dobot_driver`` publishes the arm joints
+(``dobot_j1``..``dobot_j4``), ``servo_driver`` the wrist (``lens_yaw``, ``lens_pitch``), each
+stamped on its own node clock (simulated time under ``use_sim_time``). ``JointStateBuffer``
+merges the parts by joint name and keeps a short stamped history per joint, so a node can ask
+for "the joints at the stamp of this image" (``at``) or "the latest joints, if fresh"
+(``latest``). All times are the stamps' own clock, never the wall clock of the process that
+buffers them: a node passes its clock's ``now`` for staleness.
+
+No rclpy import: nodes feed it messages, tests feed it numbers.
+"""
+
+import bisect
+from dataclasses import dataclass
+import math
+
+from helio_optics.rig_kinematics import JOINT_NAMES
+import numpy as np
+
+
+@dataclass
+class JointLookup:
+    """The answer of a lookup: `positions` (in the buffer's name order) or None and why."""
+
+    positions: np.ndarray = None
+    reason: str = ''
+    gap: float = 0.0          # largest distance from the asked time to a sample used [s]
+
+    def __bool__(self):
+        """Return whether joints were found."""
+        return self.positions is not None
+
+
+class JointStateBuffer:
+    """
+    Partial ``/joint_states`` merged by name, with a stamped history on the stamps' clock.
+
+    `names` are the joints a lookup returns, in order (default the rig's five). Each joint
+    keeps the samples of the last `history` seconds (at least the newest one). A stamp more
+    than `restart_jump` seconds older than a joint's newest sample means the clock was
+    restarted (a simulation started again): the history is dropped.
+    """
+
+    def __init__(self, names=JOINT_NAMES, history=10.0, restart_jump=1.0):
+        """Start empty; `history` and `restart_jump` in seconds."""
+        if not history > 0.0 or not restart_jump > 0.0:
+            raise ValueError(f'history and restart_jump must be > 0 s, got {history} and '
+                             f'{restart_jump}')
+        self.names = tuple(names)
+        self.history = float(history)
+        self.restart_jump = float(restart_jump)
+        self._stamps = {name: [] for name in self.names}
+        self._values = {name: [] for name in self.names}
+
+    def clear(self):
+        """Forget every sample."""
+        for name in self.names:
+            self._stamps[name].clear()
+            self._values[name].clear()
+
+    def add(self, stamp, names, positions):
+        """
+        Take one (possibly partial) joint state at `stamp` [s].
+
+        Joints not in the buffer's names are ignored; a name without a position or with a
+        non-finite one is skipped. Return what was skipped, as a sentence ('' when nothing).
+        """
+        stamp = float(stamp)
+        if not math.isfinite(stamp):
+            return f'joint state with a non-finite stamp {stamp!r} skipped'
+        problems = []
+        if len(positions) < len(names):
+            problems.append(f'{len(names)} names but {len(positions)} positions')
+        for name, value in zip(names, positions):
+            if name not in self._stamps:
+                continue
+            value = float(value)
+            if not math.isfinite(value):
+                problems.append(f'{name} = {value}')
+                continue
+            stamps = self._stamps[name]
+            if stamps and stamp < stamps[-1] - self.restart_jump:
+                self.clear()     # the clock went back: a restarted simulation
+            self._insert(name, stamp, value)
+        return ('joint state partly skipped: ' + ', '.join(problems)) if problems else ''
+
+    def add_message(self, message):
+        """Take a sensor_msgs/JointState (stamped in its header); return what was skipped."""
+        stamp = message.header.stamp
+        return self.add(stamp.sec + stamp.nanosec * 1e-9, message.name, message.position)
+
+    def _insert(self, name, stamp, value):
+        stamps, values = self._stamps[name], self._values[name]
+        if stamps and stamp >= stamps[-1]:
+            index = len(stamps)
+        else:
+            index = bisect.bisect_right(stamps, stamp)
+        if index > 0 and stamps[index - 1] == stamp:
+            values[index - 1] = value        # the same stamp again: the newer message wins
+            return
+        stamps.insert(index, stamp)
+        values.insert(index, value)
+        cut = bisect.bisect_left(stamps, stamps[-1] - self.history)
+        if cut > 0:
+            del stamps[:cut], values[:cut]
+
+    def newest_stamp(self):
+        """Return the newest stamp over all joints [s], or None when empty."""
+        newest = [s[-1] for s in self._stamps.values() if s]
+        return max(newest) if newest else None
+
+    def at(self, stamp, tolerance):
+        """
+        Return the joints at `stamp` [s] (JointLookup).
+
+        Each joint is interpolated linearly between the samples around `stamp` when both lie
+        within `tolerance` [s] of it; otherwise its nearest sample is used if that lies within
+        `tolerance`. A joint with no sample that close makes the lookup fail, naming it.
+        """
+        stamp = float(stamp)
+        positions, worst = [], 0.0
+        for name in self.names:
+            stamps, values = self._stamps[name], self._values[name]
+            if not stamps:
+                return JointLookup(reason=f'no {name} received yet')
+            index = bisect.bisect_left(stamps, stamp)
+            before = index - 1 if index > 0 else None
+            after = index if index < len(stamps) else None
+            if after is not None and stamps[after] == stamp:
+                positions.append(values[after])
+                continue
+            gaps = {i: abs(stamps[i] - stamp) for i in (before, after) if i is not None}
+            if before is not None and after is not None and max(gaps.values()) <= tolerance:
+                weight = (stamp - stamps[before]) / (stamps[after] - stamps[before])
+                positions.append(values[before] + weight * (values[after] - values[before]))
+                worst = max(worst, max(gaps.values()))
+                continue
+            nearest = min(gaps, key=gaps.get)
+            if gaps[nearest] > tolerance:
+                return JointLookup(reason=f'nearest {name} is {gaps[nearest]:.3f} s from the '
+                                          f'asked time (tolerance {tolerance:g} s)',
+                                   gap=gaps[nearest])
+            positions.append(values[nearest])
+            worst = max(worst, gaps[nearest])
+        return JointLookup(positions=np.array(positions), gap=worst)
+
+    def latest(self, now, max_age=0.0):
+        """
+        Return every joint's newest value (JointLookup), if none is older than `max_age`.
+
+        Ages count from `now` [s] on the stamps' clock; `max_age` 0 accepts any age.
+        """
+        positions, worst = [], 0.0
+        for name in self.names:
+            stamps = self._stamps[name]
+            if not stamps:
+                return JointLookup(reason=f'no {name} received yet')
+            age = float(now) - stamps[-1]
+            if max_age > 0.0 and age > max_age:
+                return JointLookup(reason=f'{name} last received {age:.3f} s ago (limit '
+                                          f'{max_age:g} s)', gap=age)
+            positions.append(self._values[name][-1])
+            worst = max(worst, age)
+        return JointLookup(positions=np.array(positions), gap=worst)

@@ -1,0 +1,112 @@
+"""JointStateBuffer: partial messages merged by name, lookups at a stamp, staleness."""
+
+import math
+
+from helio_optics.node_kit.conversions import stamp_from_seconds
+from helio_optics.node_kit.joint_states import JointStateBuffer
+from helio_optics.rig_kinematics import JOINT_NAMES
+import numpy as np
+import pytest
+from sensor_msgs.msg import JointState
+
+ARM = ('dobot_j1', 'dobot_j2', 'dobot_j3', 'dobot_j4')
+WRIST = ('lens_yaw', 'lens_pitch')
+
+
+def moving_joints(t):
+    """Joints x(t) of a move at constant joint speeds (the truth lookups are held against)."""
+    return np.array([0.1, 0.5, 0.3, -0.2, 0.4]) + t * np.array([0.2, -0.1, 0.05, 0.3, -0.15])
+
+
+def feed_drivers(buffer, times_arm, times_wrist):
+    """Feed the buffer as the two drivers do: arm and wrist parts on their own stamps."""
+    for t in times_arm:
+        x = moving_joints(t)
+        buffer.add(t, ARM, [x[0], x[1], x[2], 0.0])
+    for t in times_wrist:
+        buffer.add(t, WRIST, moving_joints(t)[3:])
+
+
+def test_partial_messages_merge_into_the_five_joints():
+    buffer = JointStateBuffer()
+    buffer.add(10.0, ARM, [0.1, 0.2, 0.3, 0.0])
+    lookup = buffer.at(10.0, 0.1)
+    assert not lookup and 'lens_yaw' in lookup.reason       # the wrist has not spoken yet
+    buffer.add(10.0, WRIST, [0.4, 0.5])
+    assert buffer.at(10.0, 0.0).positions.tolist() == [0.1, 0.2, 0.3, 0.4, 0.5]
+    assert buffer.names == JOINT_NAMES
+
+
+def test_lookup_interpolates_a_move_between_the_drivers_own_stamps():
+    buffer = JointStateBuffer()
+    # 20 Hz from the arm, 20 Hz from the wrist, offset by 23 ms, pairs arriving swapped
+    arm_times = np.arange(0.0, 2.0, 0.05)
+    wrist_times = np.arange(0.023, 2.0, 0.05).reshape(-1, 2)[:, ::-1].ravel()
+    feed_drivers(buffer, arm_times, wrist_times)
+    for t in (0.5, 0.517, 1.26, 1.949):
+        lookup = buffer.at(t, 0.06)
+        assert lookup, lookup.reason
+        assert lookup.positions == pytest.approx(moving_joints(t), abs=1e-12)
+        assert lookup.gap <= 0.05
+
+
+def test_a_joint_farther_than_the_tolerance_fails_the_lookup_naming_it():
+    buffer = JointStateBuffer()
+    feed_drivers(buffer, [0.0, 0.05, 0.10], [0.0])
+    lookup = buffer.at(0.10, 0.05)
+    assert not lookup
+    assert 'lens_yaw' in lookup.reason and '0.100 s' in lookup.reason
+    assert lookup.gap == pytest.approx(0.10)
+    # past the newest sample of each joint but within the tolerance: the newest values
+    feed_drivers(buffer, [], [0.10])
+    lookup = buffer.at(0.13, 0.05)
+    assert lookup.positions == pytest.approx(moving_joints(0.10), abs=1e-12)
+    assert lookup.gap == pytest.approx(0.03)
+
+
+def test_latest_is_refused_when_a_driver_went_quiet():
+    buffer = JointStateBuffer()
+    feed_drivers(buffer, [1.0, 2.0, 3.0], [1.0])
+    lookup = buffer.latest(now=3.1, max_age=0.5)
+    assert not lookup and 'lens_yaw last received 2.100 s ago' in lookup.reason
+    assert buffer.latest(now=3.1, max_age=0.0)       # 0: any age
+    buffer.add(3.05, WRIST, [0.0, 0.0])
+    assert buffer.latest(now=3.1, max_age=0.5).positions[3:].tolist() == [0.0, 0.0]
+
+
+def test_non_finite_positions_are_skipped_and_said():
+    buffer = JointStateBuffer()
+    problem = buffer.add(1.0, ('dobot_j1', 'lens_yaw'), [math.nan, 0.2])
+    assert 'dobot_j1 = nan' in problem
+    assert buffer.add(1.0, ('lens_pitch',), []) == \
+        'joint state partly skipped: 1 names but 0 positions'
+    assert 'non-finite stamp' in buffer.add(math.inf, ARM, [0.0] * 4)
+    assert buffer.latest(1.0).reason == 'no dobot_j1 received yet'
+
+
+def test_a_clock_that_jumps_back_clears_the_history():
+    buffer = JointStateBuffer(restart_jump=1.0)
+    feed_drivers(buffer, [100.0, 100.05], [100.0, 100.05])
+    assert buffer.at(100.05, 0.01)
+    feed_drivers(buffer, [0.0], [0.0])                    # a simulation restarted at 0
+    assert not buffer.at(100.05, 0.01)
+    assert buffer.at(0.0, 0.0).positions == pytest.approx(moving_joints(0.0), abs=1e-12)
+    assert buffer.newest_stamp() == 0.0
+
+
+def test_history_older_than_its_span_is_dropped_but_the_newest_kept():
+    buffer = JointStateBuffer(history=1.0)
+    feed_drivers(buffer, np.arange(0.0, 5.0, 0.1), [0.0])
+    assert not buffer.at(1.0, 0.01)                       # dropped
+    assert buffer.at(4.9, 10.0).positions[0] == pytest.approx(moving_joints(4.9)[0])
+    lookup = buffer.latest(now=5.0)
+    assert lookup.positions[3] == pytest.approx(moving_joints(0.0)[3])
+
+
+def test_a_joint_state_message_is_read_from_its_header_stamp():
+    buffer = JointStateBuffer()
+    message = JointState(name=list(WRIST), position=[0.25, -0.5])
+    message.header.stamp = stamp_from_seconds(1700000000.5)
+    assert buffer.add_message(message) == ''
+    buffer.add(1700000000.5, ARM, [0.0, 0.1, 0.2, 0.0])
+    assert buffer.at(1700000000.5, 0.0).positions.tolist() == [0.0, 0.1, 0.2, 0.25, -0.5]

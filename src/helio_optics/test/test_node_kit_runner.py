@@ -1,0 +1,78 @@
+"""run_node: every node's main() spins until shutdown and always cleans up."""
+
+from helio_optics.node_kit.runner import run_node
+import pytest
+import rclpy
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+
+class ShutsDownItself(Node):
+    """A node that asks for an external shutdown from its first timer tick."""
+
+    destroyed = 0
+
+    def __init__(self):
+        super().__init__('helio_test_shuts_down_itself')
+        self.create_timer(0.01, lambda: rclpy.try_shutdown())
+
+    def destroy_node(self):
+        type(self).destroyed += 1
+        return super().destroy_node()
+
+
+class FailsToStart(Node):
+    """A node whose constructor refuses a bad parameter."""
+
+    def __init__(self):
+        super().__init__('helio_test_fails_to_start')
+        raise ValueError('port must not be empty')
+
+
+def test_external_shutdown_ends_the_spin_and_destroys_the_node():
+    run_node(ShutsDownItself, args=[])
+    assert ShutsDownItself.destroyed == 1
+    assert not rclpy.ok()
+
+
+def test_a_constructor_error_reaches_the_caller_after_rclpy_shut_down():
+    with pytest.raises(ValueError, match='port must not be empty'):
+        run_node(FailsToStart, args=[])
+    assert not rclpy.ok()
+
+
+class InterruptedWhileStarting(Node):
+    """A node whose start is cut short by a shutdown (Ctrl-C during its constructor)."""
+
+    def __init__(self):
+        super().__init__('helio_test_interrupted_while_starting')
+        rclpy.try_shutdown()                          # what the signal handler does
+        self.create_publisher(JointState, 'never', 1)  # the context is gone: RCLError
+
+
+class FailsToStop(Node):
+    """A node stopped by Ctrl-C (no signal handler here) whose destroy_node raises."""
+
+    def __init__(self):
+        super().__init__('helio_test_fails_to_stop')
+        self.create_timer(0.01, self._interrupt)
+
+    def _interrupt(self):
+        raise KeyboardInterrupt
+
+    def destroy_node(self):
+        super().destroy_node()
+        raise RuntimeError('could not stop the device')
+
+
+def test_a_stop_while_the_node_starts_is_a_normal_exit():
+    run_node(InterruptedWhileStarting, args=[])
+    assert not rclpy.ok()
+
+
+def test_rclpy_is_shut_down_even_when_destroy_node_raises():
+    with pytest.raises(RuntimeError, match='could not stop the device'):
+        run_node(FailsToStop, args=[])
+    assert not rclpy.ok()
+    rclpy.init(args=[])          # a later init works: nothing was left behind
+    rclpy.shutdown()
