@@ -25,7 +25,7 @@ setup(
         'console_scripts': [
             'dobot_driver = helio_drivers.dobot_driver_node:main',
             'servo_driver = helio_drivers.servo_driver_node:main',
-            'sim_world = helio_drivers.sim_world_node:main',
+            'sim_world = helio_drivers.sim.world_node:main',
         ],
     },
 )

@@ -7,10 +7,8 @@ Figures: command round-trip latency (GetPose on the Dobot emulator, Get Position
 Maestro emulator) median and p99; the pose polling rate one client achieves; and for arm
 moves, the time from sending a MoveArm goal to receiving its result against the motion time
 the emulator planned (their difference is the driver's completion overhead), plus the same
-at the library level (queue a move, wait for its executed index). The simulated world's
-figures (heat-solver and flux-map cost per step, real-time factor of the world and of the
-sim_world node with both cameras publishing) come from helio_drivers.sim_bench and are added
-unless --skip-sim is given.
+at the library level (queue a move, wait for its executed index). The simulated world has
+its own benchmark: ``python -m helio_drivers.sim.bench``.
 """
 
 import argparse
@@ -22,7 +20,7 @@ from helio_drivers import dobot_protocol as proto
 from helio_drivers.dobot_client import DobotClient
 from helio_drivers.dobot_emulator import DobotEmulator
 from helio_drivers.maestro_client import MaestroClient
-from helio_drivers.maestro_emulator import MaestroEmulator
+from helio_drivers.maestro_emulator import CONFIGURED_SETTINGS, MaestroEmulator
 from helio_optics.bench_report import add_json_option, call_durations, report
 import numpy as np
 
@@ -60,7 +58,7 @@ def bench_round_trips(samples, poll_seconds=2.0):
     # the same with the replies held back by their time on a 115200 baud line
     figures.update(dobot_link_figures(max(100, samples // 10), poll_seconds, warm_up=0,
                                       suffix='_115200baud', line_baudrate=115200))
-    with MaestroEmulator() as emulator:
+    with MaestroEmulator(**CONFIGURED_SETTINGS) as emulator:
         client = MaestroClient(emulator.port_path, timeout=0.5, retries=0)
         client.connect()
         call_durations(lambda: client.get_position(0), 20)
@@ -164,17 +162,11 @@ def main(argv=None):
                         help='duration of each pose polling run [s] (default 2)')
     parser.add_argument('--skip-node', action='store_true',
                         help='skip the MoveArm benchmark (needs the built workspace)')
-    parser.add_argument('--skip-sim', action='store_true',
-                        help='skip the simulated world figures (helio_drivers.sim_bench)')
     args = parser.parse_args(argv)
     figures = bench_round_trips(args.samples, args.poll_seconds)
     figures.update(bench_client_moves(poll_period=0.02))
     if not args.skip_node:
         figures.update(bench_node_moves())
-    if not args.skip_sim:
-        from helio_drivers.sim_bench import bench_sim
-        figures.update({name: float(value)
-                        for name, value in bench_sim(skip_node=args.skip_node).items()})
     return report(figures, args.json)
 
 

@@ -1,11 +1,15 @@
 """
 Dobot Magician client over pyserial: typed commands with timeouts and bounded retries.
 
-Every request waits for the reply that echoes its id and ctrl, up to ``timeout`` seconds;
-a missing, corrupted (bad checksum) or truncated reply is retried up to ``retries`` more
-times, then ``DeviceTimeoutError`` says which command failed. Retrying a queued move whose
-reply was lost may queue it twice; PTP targets are absolute, so the duplicate is a move of
-zero length, and the client waits for the later index. A failing port (unplugged) raises
+Every request waits for the reply that echoes its id and ctrl with the parameter size the
+protocol defines for it (and, for a queued write, an index above those given before), up to
+``timeout`` seconds; a missing, corrupted (bad checksum), truncated or mis-sized reply is
+retried up to ``retries`` more times, then ``DeviceTimeoutError`` says which command failed.
+After a timeout or a retry the next request first settles the line (a read that the device
+answers after every earlier reply), so a late reply never answers a later request.
+Retrying a queued move whose reply was lost may queue it twice; PTP targets are absolute,
+so the duplicate is a move of zero length (and the driver node force-stops and clears the
+queue whenever a move fails). A failing port (unplugged) raises
 ``LinkError`` at once and closes the port.
 
 A queued move is complete when the executed index (command 246) reaches the index its
@@ -19,19 +23,16 @@ import math
 import time
 
 from helio_drivers import dobot_protocol as proto
-from helio_drivers.dobot_emulator import J4_LIMITS_DEG
 from helio_drivers.serial_link import (
     DeviceTimeoutError, LinkError, PORT_FAILURES, SerialClient)
-from helio_optics.arm_kinematics import DobotArm, UnreachableError
+from helio_optics.arm_kinematics import check_joint_limits, DobotArm
 import numpy as np
 import serial
 
-CARTESIAN_MODES = (proto.PtpMode.MOVJ_XYZ, proto.PtpMode.MOVL_XYZ, proto.PtpMode.JUMP_XYZ)
+# The read that settles the line after a timeout (see DobotClient._settle).
+_SETTLE = proto.ptp_common_params_request()
 
-LIMIT_ALARMS = frozenset(
-    [proto.Alarm.PLAN_INV_SINGULARITY, proto.Alarm.PLAN_INV_CALC, proto.Alarm.PLAN_INV_LIMIT,
-     proto.Alarm.MOVE_INV_SINGULARITY, proto.Alarm.MOVE_INV_CALC, proto.Alarm.MOVE_INV_LIMIT]
-    + [code for code in proto.Alarm if code.name.startswith('LIMIT_AXIS')])
+CARTESIAN_MODES = (proto.PtpMode.MOVJ_XYZ, proto.PtpMode.MOVL_XYZ, proto.PtpMode.JUMP_XYZ)
 
 
 def target_to_protocol(mode, target):
@@ -58,7 +59,7 @@ def check_target(arm, mode, target):
     Raise UnreachableError (naming the joint and the excess) for a target beyond the limits.
 
     `target` is SI as in MoveArm: Cartesian (m, rad) or joints (rad). The end servo j4 is
-    checked against the Magician's +-150 deg as well.
+    checked against the arm parameters' ``j4_limits`` as well.
     """
     values = np.array([float(v) for v in target])
     if mode == proto.PtpMode.MOVJ_ANGLE:
@@ -70,13 +71,7 @@ def check_target(arm, mode, target):
         j4 = values[3] - joints[0]
     else:
         raise ValueError(f'mode {mode} is not one of MOVJ_XYZ (1), MOVL_XYZ (2), MOVJ_ANGLE (4)')
-    lower, upper = (math.radians(v) for v in J4_LIMITS_DEG)
-    if not lower <= j4 <= upper:
-        excess = max(lower - j4, j4 - upper)
-        raise UnreachableError(
-            f'j4 (end servo) would be {math.degrees(j4):.2f} deg, {math.degrees(excess):.2f} '
-            f'deg outside [{J4_LIMITS_DEG[0]:.1f}, {J4_LIMITS_DEG[1]:.1f}] deg',
-            joint='j4 (end servo)', excess=excess)
+    check_joint_limits([arm.parameters.end_servo_limit()], [j4])
 
 
 class DobotClient(SerialClient):
@@ -88,6 +83,11 @@ class DobotClient(SerialClient):
         self.arm = arm or DobotArm()
         self._reader = proto.FrameReader()
         self.requests = 0
+        self.mismatched_replies = 0     # frames with the right id and ctrl but the wrong size
+        self.stale_replies = 0          # queued-write replies repeating an earlier index
+        self._last_queue_index = 0      # highest queue index this link was given
+        self._unsettled = False         # a reply to an earlier request may still arrive
+        self.settles = 0                # settling reads sent (after timeouts and retries)
 
     # ---- link -------------------------------------------------------------------------------
 
@@ -98,11 +98,22 @@ class DobotClient(SerialClient):
 
     def _on_open(self):
         self._reader.reset()
+        self._last_queue_index = 0      # a device reopened may have restarted its queue
+        self._unsettled = False
 
     # ---- requests ---------------------------------------------------------------------------
 
     def request(self, frame, timeout=None):
-        """Send `frame` and return the reply Frame; retries, then DeviceTimeoutError."""
+        """
+        Send `frame` and return its reply Frame; retries, then DeviceTimeoutError.
+
+        A reply must echo the request's id and ctrl and carry the parameter bytes the
+        protocol defines for it (``dobot_protocol.reply_length``); a queued write's index
+        must be above every index this client was given on this link (a repeated one is a
+        late reply to an earlier request). Frames that fail these checks are counted and
+        skipped. After a timeout, or once an attempt went unanswered, the next request first
+        settles the line (``_settle``), so a late reply can never answer a later request.
+        """
         timeout = self.timeout if timeout is None else timeout
         name = _command_name(frame)
         with self._lock:
@@ -110,6 +121,8 @@ class DobotClient(SerialClient):
                 raise LinkError(f'{name}: port {self.port} is not open')
             data = frame.encode()
             try:
+                if self._unsettled:
+                    self._settle(name, timeout)
                 for attempt in range(self.retries + 1):
                     if attempt:
                         self.retried += 1
@@ -122,13 +135,42 @@ class DobotClient(SerialClient):
                         continue        # a slow link, not a lost one: retry
                     reply = self._await_reply(frame, time.monotonic() + timeout)
                     if reply is not None:
+                        # an earlier attempt may still be answered: settle before the next
+                        self._unsettled = attempt > 0
+                        self._accepted(frame, reply)
                         return reply
+                self._unsettled = True
             except PORT_FAILURES as error:
                 self._close_locked()
                 raise LinkError(f'{name}: link to {self.port} lost: {error}') from error
         raise DeviceTimeoutError(
             f'{name}: no valid reply from {self.port} within {timeout:.3f} s '
             f'after {self.retries + 1} attempts')
+
+    def _settle(self, name, timeout):
+        """
+        Wait until the replies to every earlier request have passed (lock held).
+
+        The device answers in order: once the reply to a read sent now arrives, any late
+        reply to an earlier request came before it and was skipped. The read is one this
+        client sends for nothing else (GetPTPCommonParams), so a late reply to an earlier
+        settling read can only settle, never answer a request.
+        """
+        self.settles += 1
+        for _ in range(self.retries + 1):
+            self._serial.reset_input_buffer()
+            self._reader.reset()
+            self._serial.write(_SETTLE.encode())
+            if self._await_reply(_SETTLE, time.monotonic() + timeout) is not None:
+                self._unsettled = False
+                return
+        raise DeviceTimeoutError(
+            f'{name}: not sent: no answer from {self.port} to a settling read within '
+            f'{timeout:.3f} s after {self.retries + 1} attempts (late replies may be pending)')
+
+    def _accepted(self, request, reply):
+        if request.write and request.queued:
+            self._last_queue_index = proto.decode_index(reply.params)
 
     def _await_reply(self, frame, deadline):
         port = self._serial
@@ -139,7 +181,14 @@ class DobotClient(SerialClient):
             port.timeout = min(remaining, 0.05)
             chunk = port.read(max(1, port.in_waiting))
             for reply in self._reader.feed(chunk):
-                if proto.is_reply_to(reply, frame):
+                if not proto.is_reply_to(reply, frame):
+                    continue
+                if not proto.reply_matches(reply, frame):
+                    self.mismatched_replies += 1        # right id and ctrl, wrong size
+                elif (frame.write and frame.queued
+                      and proto.decode_index(reply.params) <= self._last_queue_index):
+                    self.stale_replies += 1             # an index given out before
+                else:
                     return reply
 
     # ---- typed commands ---------------------------------------------------------------------
@@ -177,6 +226,10 @@ class DobotClient(SerialClient):
         """Queue the homing procedure; return its queue index."""
         return proto.decode_index(self.request(proto.home_request()).params)
 
+    def queue_left_space(self):
+        """Return how many more commands the device's queue takes."""
+        return proto.decode_u32(self.request(proto.queue_left_space_request()).params)
+
     def ptp(self, mode, values):
         """Queue a PTP move (mode, four values in mm/deg); return its queue index."""
         return proto.decode_index(
@@ -206,6 +259,9 @@ class DobotClient(SerialClient):
     def queue_clear(self):
         """Drop the queued commands not yet executed."""
         self.request(proto.queue_clear_request())
+        # Whether a firmware restarts its indices after a clear is not documented: accept
+        # any index again (the drain after every timeout keeps late replies out).
+        self._last_queue_index = 0
 
     def stop_and_clear(self):
         """Force-stop, clear the queue and restart it (ready for the next move)."""
@@ -237,8 +293,4 @@ class DobotClient(SerialClient):
 
 
 def _command_name(frame):
-    try:
-        name = proto.CommandId(frame.command_id).name
-    except ValueError:
-        name = f'command {frame.command_id}'
-    return name + (' (write)' if frame.write else '')
+    return proto.command_name(frame.command_id) + (' (write)' if frame.write else '')

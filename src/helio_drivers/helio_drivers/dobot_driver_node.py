@@ -3,37 +3,56 @@ Node dobot_driver: the Dobot Magician on a serial port (real arm or the emulator
 
 - action ``move_arm`` (helio_msgs/MoveArm): MOVJ_XYZ / MOVL_XYZ (x, y, z [m], r [rad],
   robot frame) or MOVJ_ANGLE (j1..j4 [rad]). Targets beyond the joint limits are refused
-  before anything moves, naming the joint. The goal succeeds when the device's executed
-  queue index reaches the move's index; feedback carries the current pose, the result the
-  achieved pose. Cancel force-stops the arm and clears the queue. Limit alarms raised by the
-  device during the move abort the goal with their description. A move longer than
-  ``move_timeout_s`` on the node clock (or ``move_wall_timeout_s`` of wall time) is stopped
-  and aborted.
-- ``joint_states`` (sensor_msgs/JointState): dobot_j1..dobot_j4 [rad] at joint_state_rate_hz.
-- ``dobot/status`` (helio_msgs/DeviceStatus): link state, reconnect attempts, active alarms.
+  before anything moves, naming the joint; so is every goal while the arm has an active
+  alarm. The goal succeeds when the device's executed queue index reaches the move's index
+  AND the arm is at the target (within ``joint_tolerance`` / ``position_tolerance``), so
+  a misattributed index cannot report a move done early; feedback carries the current pose,
+  the result the achieved pose. An alarm raised during the move aborts it with its
+  description. Cancel, a move past ``move_timeout`` (node clock) or ``move_wall_timeout``
+  (wall clock), and every device error force-stop the arm, clear the queue and confirm the
+  arm stands still before the goal ends (``stop_timeout``).
+- services ``dobot/home`` (std_srvs/Trigger): run the homing procedure (the base has an
+  incremental encoder), answered when the arm is home (``home_timeout``);
+  ``dobot/clear_alarms`` (std_srvs/Trigger): clear the device's alarms, answered with
+  what was cleared and what is still active.
+- ``joint_states`` (sensor_msgs/JointState): dobot_j1..dobot_j4 [rad] at joint_state_rate.
+- ``dobot/status`` (helio_msgs/DeviceStatus): link state, reconnect attempts, active alarms
+  (published at once when they change).
 
-A lost port (unplugged, or the device stops answering) is reopened with exponential backoff;
-meanwhile goals abort at once with a clear message, and a goal in progress aborts as soon as
-the link fails. On shutdown the queue is force-stopped and cleared. The link, the device
-thread and the action plumbing are ``device_action_node.DeviceActionNode``'s.
+The action server and the services exist only while the node has held its device once; a
+port held by another process makes the node refuse to start. ``port: auto`` finds the arm
+by the USB id of its USB-serial adapter (``usb_ids``). A lost port is reopened with
+exponential backoff; meanwhile goals abort at once with a clear message. Every connection
+force-stops the arm and clears its queue first. On shutdown the arm is stopped the same
+way. The link, the device thread and the action plumbing are
+``device_action_node.DeviceActionNode``'s.
 """
+
+import math
 
 from helio_drivers import dobot_protocol as proto
 from helio_drivers.device_action_node import (
     DeviceActionNode, DeviceSpec, GoalRefused, MoveProgress)
-from helio_drivers.dobot_client import (
-    check_target, DobotClient, LIMIT_ALARMS, pose_to_si)
+from helio_drivers.dobot_client import check_target, DobotClient, pose_to_si
+from helio_drivers.serial_link import DeviceError
 from helio_msgs.action import MoveArm
-from helio_optics.arm_kinematics import UnreachableError
-from helio_optics.node_parameters import declare
-from helio_optics.node_runner import run_node
+from helio_optics.arm_kinematics import DobotArm, UnreachableError
+from helio_optics.node_kit.deployment import declare_rig
+from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.runner import run_node
+from std_srvs.srv import Trigger
 
 MODES = {MoveArm.Goal.MOVJ_XYZ: 'MOVJ_XYZ', MoveArm.Goal.MOVL_XYZ: 'MOVL_XYZ',
          MoveArm.Goal.MOVJ_ANGLE: 'MOVJ_ANGLE'}
 
-SPEC = DeviceSpec(device='dobot', label='dobot', action_name='move_arm', port='/dev/ttyUSB0',
-                  baudrate_max=4000000, timeout_s=0.2, move_timeout_s=60.0,
-                  move_timeout_max_s=3600.0)
+# The Magician's USB-serial adapter: Silicon Labs CP210x, on some units a WCH CH340.
+DOBOT_USB_IDS = ('10c4:ea60', '1a86:7523')
+
+SPEC = DeviceSpec(device='dobot', label='dobot', action_name='move_arm', port='auto',
+                  usb_ids=DOBOT_USB_IDS, baudrate_max=4000000, timeout=0.2,
+                  move_timeout=60.0, move_timeout_max=3600.0)
+
+STILL_DEG = 0.01        # joints moving less than this between two polls stand still [deg]
 
 
 def pose_result(pose):
@@ -70,6 +89,17 @@ class DobotDriverNode(DeviceActionNode):
                     'PTP acceleration ratio applied to every move [%].', 1.0, 100.0))
         self.home_on_connect = declare(self, 'home_on_connect', False,
                                        'Run the homing procedure after (re)connecting.')
+        self.home_timeout = declare(
+            self, 'home_timeout', 60.0,
+            'Longest time the homing procedure may take on the node clock [s].', 1.0, 600.0)
+        self.joint_tolerance = declare(
+            self, 'joint_tolerance', 0.0005,
+            'A MOVJ_ANGLE move has arrived when every joint is within this of its target '
+            '[rad].', 1e-5, 0.1)
+        self.position_tolerance = declare(
+            self, 'position_tolerance', 0.0002,
+            'A Cartesian move has arrived when the flange is within this of its target [m].',
+            1e-6, 0.01)
         self.joint_names = list(declare(
             self, 'joint_names', ['dobot_j1', 'dobot_j2', 'dobot_j3', 'dobot_j4'],
             'Names of j1..j4 on /joint_states.'))
@@ -77,19 +107,29 @@ class DobotDriverNode(DeviceActionNode):
             raise ValueError(f'joint_names needs 4 names, got {self.joint_names}')
         if len(self.joint_params.velocity) != 4 or len(self.joint_params.acceleration) != 4:
             raise ValueError('joint_velocity_dps and joint_acceleration_dps2 need 4 values')
+        rig, _ = declare_rig(self)      # link lengths and joint limits of this arm
+        self.client.arm = DobotArm(rig.parameters.arm)
         self.start_device()
 
     # ---- device hooks -----------------------------------------------------------------------
 
     def configure_device(self):
-        """Check the arm answers, set the PTP parameters, start the queue (and home)."""
+        """Stop whatever the arm was doing, set the PTP parameters, start the queue (home)."""
         self.client.get_pose()            # the device answers, not just the port opens
+        _, done = self.stop_device()
+        self.get_logger().info(f'on connect: {done}')
         self.client.set_ptp_joint_params(self.joint_params)
         self.client.set_ptp_coordinate_params(self.coordinate_params)
         self.client.set_ptp_common_params(self.common_params)
         self.client.queue_start()
         if self.home_on_connect:
             self.client.home()
+
+    def advertise_services(self):
+        """Create dobot/home and dobot/clear_alarms."""
+        for name, callback in (('dobot/home', self._home),
+                               ('dobot/clear_alarms', self._clear_alarms)):
+            self.device_services.append(self.create_service(Trigger, name, callback))
 
     def read_joints(self):
         """Return the joint names and j1..j4 [rad]."""
@@ -100,8 +140,15 @@ class DobotDriverNode(DeviceActionNode):
         """Return the names of the active alarms."""
         return [proto.alarm_description(a) for a in self.client.get_alarms()]
 
+    def _refuse_while_alarmed(self, what):
+        alarms = self._poll_alarms()
+        if alarms:
+            raise GoalRefused(
+                f'{what} refused: the dobot has active alarms ({"; ".join(alarms)}); remove '
+                'the cause, then call the dobot/clear_alarms service (std_srvs/srv/Trigger)')
+
     def plan_move(self, goal):
-        """Return (mode, SI target), refusing a bad mode or a target beyond a joint limit."""
+        """Return (mode, SI target); refuse a bad mode, a target beyond a limit, an alarm."""
         mode = goal.mode
         if mode not in MODES:
             raise GoalRefused(f'mode {mode} is not MOVJ_XYZ (1), MOVL_XYZ (2) or MOVJ_ANGLE (4)')
@@ -110,40 +157,104 @@ class DobotDriverNode(DeviceActionNode):
             check_target(self.client.arm, mode, target)
         except (UnreachableError, ValueError) as error:
             raise GoalRefused(f'{MODES[mode]} target refused: {error}') from error
+        self._refuse_while_alarmed(f'{MODES[mode]} goal')
         return mode, target
 
     def start_move(self, plan):
-        """Clear old alarms (so alarms after the move are its own), queue the move."""
+        """Queue the move; return (mode, target, queue index)."""
         mode, target = plan
-        if self.client.get_alarms():
-            self.client.clear_alarms()
-        return mode, self.client.move(mode, target)
+        return mode, target, self.client.move(mode, target)
+
+    def _arrival_error(self, mode, target, pose):
+        """Return how far the arm is from an SI target, or '' when it is there."""
+        cartesian, joints = pose_to_si(pose)
+        if mode == MoveArm.Goal.MOVJ_ANGLE:
+            worst = max(range(4), key=lambda j: abs(joints[j] - target[j]))
+            if abs(joints[worst] - target[worst]) <= self.joint_tolerance:
+                return ''
+            return f'j{worst + 1} is {math.degrees(joints[worst] - target[worst]):+.2f} deg ' \
+                   'from its target'
+        distance = math.dist(cartesian[:3], target[:3])
+        r_error = math.remainder(cartesian[3] - target[3], 2.0 * math.pi)
+        if distance <= self.position_tolerance and abs(r_error) <= self.joint_tolerance:
+            return ''
+        return f'the flange is {distance * 1000.0:.2f} mm and r {math.degrees(r_error):+.2f} ' \
+               'deg from the target'
 
     def poll_move(self, move):
-        """Done when the executed index reaches the move's; limit alarms make it a failure."""
-        mode, index = move
+        """Done when the index is executed and the arm is at the target; alarms fail it."""
+        mode, target, index = move
+        alarms = self.client.get_alarms()
+        pose = self.client.get_pose()
+        result = pose_result(pose)
+        if alarms:
+            return MoveProgress(done=True, result=result, message=(
+                'device refused the move: '
+                + '; '.join(proto.alarm_description(a) for a in alarms)))
         if self.client.executed_index() >= index:
-            alarms = [a for a in self.client.get_alarms() if a in LIMIT_ALARMS]
-            result = pose_result(self.client.get_pose())
-            if alarms:
-                return MoveProgress(done=True, result=result, message=(
-                    'device refused the move: '
-                    + '; '.join(proto.alarm_description(a) for a in alarms)))
-            return MoveProgress(done=True, success=True, result=result,
-                                message=f'{MODES[mode]} done (index {index})')
-        pose = pose_result(self.client.get_pose())
+            far = self._arrival_error(mode, target, pose)
+            if not far:
+                return MoveProgress(done=True, success=True, result=result,
+                                    message=f'{MODES[mode]} done (index {index})')
+            # Index reached but the arm is not there: the index was not this move's (or it
+            # has not settled yet); keep polling until it arrives or the time limit.
         return MoveProgress(feedback=MoveArm.Feedback(
-            current_cartesian=pose.achieved_cartesian, current_joints=pose.achieved_joints))
-
-    def stop_move(self, move):
-        """Force-stop the arm, clear and restart the queue; return where it stopped."""
-        self.client.stop_and_clear()
-        return pose_result(self.client.get_pose()), 'arm force-stopped and queue cleared'
+            current_cartesian=result.achieved_cartesian,
+            current_joints=result.achieved_joints))
 
     def stop_device(self):
-        """Leave the arm stopped: force-stop and clear the queue."""
-        self.client.queue_force_stop()
-        self.client.queue_clear()
+        """Force-stop, clear and restart the queue; confirm the joints stand still."""
+        self.client.stop_and_clear()
+        before = self.client.get_pose()
+        self._stopping.wait(self.poll_period)       # pacing the two samples
+        after = self.client.get_pose()
+        moved = max(abs(a - b) for a, b in zip(after.joints, before.joints))
+        if moved > STILL_DEG:
+            raise DeviceError(f'the arm still moves after force-stop ({moved:.3f} deg in '
+                              f'{self.poll_period * 1000.0:.0f} ms)')
+        return pose_result(after), 'arm force-stopped and queue cleared (confirmed still)'
+
+    # ---- services ---------------------------------------------------------------------------
+
+    def _start_home(self, plan):
+        return 'home', None, self.client.home()
+
+    def _poll_home(self, move):
+        _, _, index = move
+        alarms = self.client.get_alarms()
+        if alarms:
+            return MoveProgress(done=True, message='homing failed: ' + '; '.join(
+                proto.alarm_description(a) for a in alarms))
+        if self.client.executed_index() >= index:
+            _, joints = pose_to_si(self.client.get_pose())
+            return MoveProgress(done=True, success=True, message='homed: joints ' + ', '.join(
+                f'{math.degrees(j):.2f}' for j in joints) + ' deg')
+        return MoveProgress()
+
+    async def _home(self, request, response):
+        response.success, response.message, _ = await self.run_job(
+            'homing', lambda: self._refuse_while_alarmed('homing'), self._start_home,
+            self._poll_home, self.home_timeout)
+        return response
+
+    def _clear_alarms_now(self):
+        if not self.client.connected:
+            return False, f'dobot not connected on {self.port} ({self._message})'
+        before = self.read_alarms()
+        self.client.clear_alarms()
+        after = self._poll_alarms()
+        self._publish_status()
+        if after:
+            return False, 'alarms still active after clearing: ' + '; '.join(after)
+        return True, ('cleared: ' + '; '.join(before)) if before else 'no alarm was active'
+
+    async def _clear_alarms(self, request, response):
+        try:
+            response.success, response.message = await self.run_call(self._clear_alarms_now)
+        except DeviceError as error:
+            response.success, response.message = False, f'clearing alarms failed: {error}'
+        self.get_logger().info(f'clear_alarms: {response.message}')
+        return response
 
 
 def main(args=None):

@@ -24,6 +24,7 @@ as executed). Force-stop halts the arm where it is. Kinematics come from
 import collections
 from dataclasses import dataclass
 import math
+import struct
 import threading
 import time
 
@@ -32,8 +33,6 @@ from helio_drivers.motion_profile import synchronised_profile, TrapezoidProfile
 from helio_drivers.pty_device import PtyDevice
 from helio_optics.arm_kinematics import DobotArm, UnreachableError
 import numpy as np
-
-J4_LIMITS_DEG = (-150.0, 150.0)
 
 
 @dataclass(frozen=True)
@@ -62,7 +61,8 @@ class DobotEmulator(PtyDevice):
     def __init__(self, port_path=None, clock=time.monotonic, arm=None,
                  home_joints_deg=(0.0, 10.0, 10.0, 0.0), initial_joints_deg=None,
                  hardware_limits=DobotHardwareLimits(), joint_params=None,
-                 coordinate_params=None, common_params=None, seed=0, line_baudrate=None):
+                 coordinate_params=None, common_params=None, seed=0, line_baudrate=None,
+                 queue_capacity=32, firmware_version=(3, 7, 0)):
         """Start the device idle at `initial_joints_deg` (home if None), queue started."""
         self.clock = clock
         self.arm = arm or DobotArm()
@@ -81,14 +81,21 @@ class DobotEmulator(PtyDevice):
         self._last_index = 0
         self._executed_index = 0
         self._alarms = set()
+        self._lost_replies = {}                 # command id -> replies still to lose
+        self._missized_replies = {}             # command id -> replies still to mis-size
+        self._settings = {}                     # command id (, address) -> bytes written
+        self._home_params = None                # SetHOMEParams (mm, deg), None: home joints
+        self._started_at = clock()
+        self.queue_capacity = queue_capacity
+        self.firmware_version = tuple(firmware_version)
         self.last_refusal = ''
         self.motion_durations = {}     # queue index -> planned motion time [s] (benchmarks)
         self.frames_received = 0
         self.checksum_errors_seen = 0
         self._reader = proto.FrameReader()
-        limits = self.arm.parameters.limits()
+        limits = self.arm.parameters.limits() + (self.arm.parameters.end_servo_limit(),)
         self._limits_deg = [(math.degrees(limit.lower), math.degrees(limit.upper))
-                            for limit in limits] + [J4_LIMITS_DEG]
+                            for limit in limits]
         super().__init__(port_path=port_path, seed=seed, name='dobot',
                          line_baudrate=line_baudrate)
 
@@ -128,12 +135,35 @@ class DobotEmulator(PtyDevice):
             self._advance()
             return self._current is not None
 
+    @property
+    def last_queued_index(self):
+        """Index the device gave the last queued command (the truth a client must report)."""
+        with self._lock:
+            return self._last_index
+
+    @property
+    def queued_count(self):
+        """Commands queued and not yet started."""
+        with self._lock:
+            self._advance()
+            return len(self._queue)
+
     def raise_alarm(self, code):
         """Set an alarm as the firmware would (fault injection beyond the link)."""
         with self._lock:
             self._alarms.add(int(code))
 
     # ---- protocol ---------------------------------------------------------------------------
+
+    def lose_replies(self, command_id, count=1):
+        """Act on the next `count` frames of `command_id` but send no reply (lost replies)."""
+        with self._lock:
+            self._lost_replies[int(command_id)] = int(count)
+
+    def missize_replies(self, command_id, count=1):
+        """Answer the next `count` frames of `command_id` with one parameter byte too few."""
+        with self._lock:
+            self._missized_replies[int(command_id)] = int(count)
 
     def handle_input(self, data):
         """Parse frames and return their replies (bytes)."""
@@ -149,97 +179,126 @@ class DobotEmulator(PtyDevice):
         return replies
 
     def handle_frame(self, frame):
-        """Act on one frame and return the reply Frame (None: the device stays silent)."""
+        """Act on one frame and return the reply Frame (None: the reply is lost)."""
         with self._lock:
-            now = self._advance()
-            cid, ctrl = frame.command_id, frame.ctrl
-            try:
-                if frame.queued and cid in _QUEUEABLE:
-                    self._decode_queued(frame)          # malformed parameters: no reply
-                    self._last_index += 1
-                    self._queue.append((self._last_index, frame, now))
-                    self._advance()
-                    return proto.Frame(cid, ctrl, proto.encode_index(self._last_index))
-                return self._immediate(frame, now)
-            except proto.ProtocolError:
-                self._alarms.add(proto.Alarm.COMMON_UNDEFINED_INSTRUCTION)
+            reply = self._answer(frame, self._advance())
+            cid = frame.command_id
+            if self._lost_replies.get(cid, 0) > 0:
+                self._lost_replies[cid] -= 1
                 return None
+            if self._missized_replies.get(cid, 0) > 0:
+                self._missized_replies[cid] -= 1
+                params = reply.params[:-1] if reply.params else b'\x00'
+                return proto.Frame(cid, reply.ctrl, params)
+            return reply
+
+    def _answer(self, frame, now):
+        cid, ctrl = frame.command_id, frame.ctrl
+        layout = proto.LAYOUTS.get(cid)
+        if layout is None:
+            # Not a command of the protocol: the firmware flags an undefined instruction.
+            # The frame is still echoed (no parameters), so a client waiting for it does not
+            # hang; a client checking the reply's size sees that it is not an answer.
+            self._refuse(proto.Alarm.COMMON_UNDEFINED_INSTRUCTION,
+                         f'command {cid} is not in the protocol')
+            return proto.Frame(cid, ctrl)
+        problem = _malformed(frame, layout)
+        if problem:
+            self._refuse(proto.Alarm.COMMON_UNDEFINED_INSTRUCTION, problem)
+            return proto.Frame(cid, ctrl)
+        if frame.write and frame.queued and layout.queueable:
+            self._last_index += 1
+            self._queue.append((self._last_index, frame, now))
+            self._advance()
+            return proto.Frame(cid, ctrl, proto.encode_index(self._last_index))
+        return proto.Frame(cid, ctrl, self._immediate(frame, now))
 
     def _immediate(self, frame, now):
-        cid, ctrl, write = frame.command_id, frame.ctrl, frame.write
+        """Act on an unqueued frame; return its reply's parameter bytes."""
+        cid, write = frame.command_id, frame.write
         C = proto.CommandId
-        if cid == C.GET_POSE and not write:
-            params = proto.encode_pose(self._pose(self._joints_now(now)))
-        elif cid == C.ALARMS:
+        if cid == C.GET_POSE:
+            return proto.encode_pose(self._pose(self._joints_now(now)))
+        if cid == C.ALARMS:
             if write:
                 self._alarms.clear()
-                params = b''
-            else:
-                params = proto.encode_alarm_state(self._alarms)
-        elif cid == C.PTP_JOINT_PARAMS:
-            if write:
-                self._joint_params = proto.decode_ptp_joint_params(frame.params)
-                params = b''
-            else:
-                params = proto.ptp_joint_params_request(self._joint_params).params
-        elif cid == C.PTP_COORDINATE_PARAMS:
-            if write:
-                self._coordinate_params = proto.decode_ptp_coordinate_params(frame.params)
-                params = b''
-            else:
-                params = proto.ptp_coordinate_params_request(self._coordinate_params).params
-        elif cid == C.PTP_COMMON_PARAMS:
-            if write:
-                self._common_params = proto.decode_ptp_common_params(frame.params)
-                params = b''
-            else:
-                params = proto.ptp_common_params_request(self._common_params).params
-        elif cid == C.QUEUE_START and write:
+                return b''
+            return proto.encode_alarm_state(self._alarms)
+        if cid == C.QUEUE_START:
             if not self._executing:
                 self._executing = True
                 self._free_at = max(self._free_at, now)
                 self._advance()
-            params = b''
-        elif cid == C.QUEUE_STOP and write:
+        elif cid == C.QUEUE_STOP:
             self._executing = False           # the current command still finishes
-            params = b''
-        elif cid == C.QUEUE_FORCE_STOP and write:
+        elif cid == C.QUEUE_FORCE_STOP:
             self._executing = False
             if self._current is not None:     # halt where the arm is now
                 self._joints = self._joints_now(now)
                 self._current = None
                 self._free_at = now
-            params = b''
-        elif cid == C.QUEUE_CLEAR and write:
+        elif cid == C.QUEUE_CLEAR:
             self._queue.clear()
-            params = b''
-        elif cid == C.QUEUE_CURRENT_INDEX and not write:
-            params = proto.encode_index(self._executed_index)
-        elif cid in (C.HOME, C.PTP, C.WAIT) and write:
-            # Unqueued motion commands: the firmware accepts them; helio always queues them.
+        elif cid == C.QUEUE_CURRENT_INDEX:
+            return proto.encode_index(self._executed_index)
+        elif cid == C.QUEUE_LEFT_SPACE:
+            return proto.encode_u32(max(0, self.queue_capacity - len(self._queue)))
+        elif cid == C.DEVICE_VERSION:
+            return bytes(self.firmware_version)
+        elif cid == C.DEVICE_TIME:
+            return proto.encode_u32(int((now - self._started_at) * 1000.0) % 2 ** 32)
+        elif cid == C.HOME_PARAMS and not write:
+            return proto.home_params_request(self._home_position()).params
+        elif write and cid in _MOTION:
+            # Unqueued motion commands: the firmware runs them next; helio always queues.
             self._last_index += 1
             self._queue.appendleft((self._last_index, frame, now))
             self._advance()
-            params = b''
+        elif write:
+            self._apply_setting(frame)
         else:
-            raise proto.ProtocolError(f'command {cid} ctrl {ctrl} is not emulated')
-        return proto.Frame(cid, ctrl, params)
+            return self._setting(frame)
+        return b''
 
-    @staticmethod
-    def _decode_queued(frame):
+    def _apply_setting(self, frame):
+        """Store a written setting (PTP parameters take effect on the next move)."""
         C = proto.CommandId
-        if frame.command_id == C.PTP:
-            proto.decode_ptp(frame.params)
-        elif frame.command_id == C.WAIT:
-            proto.decode_wait(frame.params)
-        elif frame.command_id == C.HOME and len(frame.params) != 4:
-            raise proto.ProtocolError('SetHOMECmd takes 4 parameter bytes')
-        elif frame.command_id == C.PTP_JOINT_PARAMS:
-            proto.decode_ptp_joint_params(frame.params)
-        elif frame.command_id == C.PTP_COORDINATE_PARAMS:
-            proto.decode_ptp_coordinate_params(frame.params)
-        elif frame.command_id == C.PTP_COMMON_PARAMS:
-            proto.decode_ptp_common_params(frame.params)
+        cid, params = frame.command_id, bytes(frame.params)
+        if cid == C.PTP_JOINT_PARAMS:
+            self._joint_params = proto.decode_ptp_joint_params(params)
+        elif cid == C.PTP_COORDINATE_PARAMS:
+            self._coordinate_params = proto.decode_ptp_coordinate_params(params)
+        elif cid == C.PTP_COMMON_PARAMS:
+            self._common_params = proto.decode_ptp_common_params(params)
+        elif cid == C.HOME_PARAMS:
+            self._home_params = proto.decode_home_params(params)
+        layout = proto.LAYOUTS[cid]
+        key = (cid, params[0]) if layout.request and params else cid
+        self._settings[key] = params
+
+    def _setting(self, frame):
+        """Reply bytes of a read: the last value written, or the device's default."""
+        C = proto.CommandId
+        cid = frame.command_id
+        if cid == C.PTP_JOINT_PARAMS:
+            return proto.ptp_joint_params_request(self._joint_params).params
+        if cid == C.PTP_COORDINATE_PARAMS:
+            return proto.ptp_coordinate_params_request(self._coordinate_params).params
+        if cid == C.PTP_COMMON_PARAMS:
+            return proto.ptp_common_params_request(self._common_params).params
+        layout = proto.LAYOUTS[cid]
+        if layout.request:          # addressed (EIO): the address, then its value
+            address = bytes(frame.params[:1]) or b'\x00'
+            stored = self._settings.get((cid, address[0]), address + bytes(layout.read - 1))
+            return address + stored[1:layout.read]
+        default = _DEFAULT_SETTINGS.get(cid, bytes(layout.read or 0))
+        return self._settings.get(cid, default)
+
+    def _home_position(self):
+        """Return the homing target (x, y, z [mm], r [deg]): SetHOMEParams, else home joints."""
+        if self._home_params is not None:
+            return self._home_params
+        return self._pose(self.home_joints_deg).cartesian
 
     # ---- motion -----------------------------------------------------------------------------
 
@@ -284,21 +343,20 @@ class DobotEmulator(PtyDevice):
     def _plan(self, index, frame, start):
         C = proto.CommandId
         cid = frame.command_id
-        if cid == C.PTP_JOINT_PARAMS:
-            self._joint_params = proto.decode_ptp_joint_params(frame.params)
-            return None
-        if cid == C.PTP_COORDINATE_PARAMS:
-            self._coordinate_params = proto.decode_ptp_coordinate_params(frame.params)
-            return None
-        if cid == C.PTP_COMMON_PARAMS:
-            self._common_params = proto.decode_ptp_common_params(frame.params)
-            return None
         if cid == C.WAIT:
             duration = proto.decode_wait(frame.params) / 1000.0
             held = self._joints.copy()
             return _Motion(index, start, duration, lambda t: held.copy())
         if cid == C.HOME:
-            return self._joint_move(index, start, self.home_joints_deg.copy())
+            if self._home_params is None:
+                return self._joint_move(index, start, self.home_joints_deg.copy())
+            target = self._inverse(np.array(self._home_params, dtype=float))
+            return None if target is None else self._joint_move(index, start, target)
+        if cid == C.CP:
+            return self._continuous_path(index, start, frame.params)
+        if cid != C.PTP:        # a setting, queued: it takes effect in its turn
+            self._apply_setting(frame)
+            return None
         command = proto.decode_ptp(frame.params)
         mode = command.mode
         values = np.array([command.a, command.b, command.c, command.d], dtype=float)
@@ -315,6 +373,17 @@ class DobotEmulator(PtyDevice):
             return self._joint_move(index, start, target)
         self._refuse(proto.Alarm.COMMON_UNDEFINED_INSTRUCTION, f'PTP mode {mode} not emulated')
         return None
+
+    def _continuous_path(self, index, start, params):
+        """SetCPCmd: a straight line to (x, y, z) [mm], absolute (mode 1) or relative (0)."""
+        mode = params[0]
+        x, y, z = struct.unpack('<3f', bytes(params[1:13]))
+        here = self._pose(self._joints)
+        target = np.array([x, y, z, here.r], dtype=float)
+        if mode == 0:
+            target[:3] += np.array(here.cartesian[:3])
+        joints = self._inverse(target)
+        return None if joints is None else self._linear_move(index, start, target, joints)
 
     def _refuse(self, alarm, reason):
         self._alarms.add(int(alarm))
@@ -398,6 +467,28 @@ class DobotEmulator(PtyDevice):
         return _Motion(index, start, profile.duration, joints_at)
 
 
-_QUEUEABLE = frozenset((proto.CommandId.HOME, proto.CommandId.PTP, proto.CommandId.WAIT,
-                        proto.CommandId.PTP_JOINT_PARAMS, proto.CommandId.PTP_COORDINATE_PARAMS,
-                        proto.CommandId.PTP_COMMON_PARAMS))
+_MOTION = frozenset((proto.CommandId.HOME, proto.CommandId.PTP, proto.CommandId.WAIT,
+                     proto.CommandId.CP))
+
+_DEFAULT_SETTINGS = {
+    proto.CommandId.DEVICE_SN: b'HELIO-EMULATOR-0001\x00',
+    proto.CommandId.DEVICE_NAME: b'Dobot Magician (helio emulator)\x00',
+    proto.CommandId.PTP_JUMP_PARAMS: struct.pack('<2f', 20.0, 100.0),
+}
+
+
+def _malformed(frame, layout):
+    """Why a frame's parameters do not fit its command's structure ('' when they do)."""
+    name = proto.command_name(frame.command_id)
+    size = len(frame.params)
+    if frame.write:
+        if layout.write is not None and size not in layout.write:
+            if not layout.write:
+                return f'{name} cannot be written'
+            sizes = ' or '.join(map(str, layout.write))
+            return f'{name} takes {sizes} parameter bytes, got {size}'
+        if frame.command_id == proto.CommandId.PTP and frame.params[0] not in tuple(proto.PtpMode):
+            return f'PTP mode {frame.params[0]} not emulated'
+    elif size not in (0, layout.request):
+        return f'reading {name} takes {layout.request} parameter bytes, got {size}'
+    return ''

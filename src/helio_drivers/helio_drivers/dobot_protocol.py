@@ -29,22 +29,133 @@ class ProtocolError(ValueError):
 
 
 class CommandId(enum.IntEnum):
-    """Command ids used by helio (Dobot Magician communication protocol)."""
+    """Command ids of the Magician protocol that helio sends or the emulator models."""
 
+    DEVICE_SN = 0
+    DEVICE_NAME = 1
+    DEVICE_VERSION = 2
+    DEVICE_TIME = 4
     GET_POSE = 10
+    RESET_POSE = 11
     ALARMS = 20               # read: get alarms state; write: clear all alarms
     HOME_PARAMS = 30
     HOME = 31
+    ARM_ORIENTATION = 50
+    END_EFFECTOR_PARAMS = 60
+    END_EFFECTOR_LASER = 61
+    END_EFFECTOR_SUCTION_CUP = 62
+    END_EFFECTOR_GRIPPER = 63
+    JOG_JOINT_PARAMS = 70
+    JOG_COORDINATE_PARAMS = 71
+    JOG_COMMON_PARAMS = 72
+    JOG = 73
     PTP_JOINT_PARAMS = 80
     PTP_COORDINATE_PARAMS = 81
+    PTP_JUMP_PARAMS = 82
     PTP_COMMON_PARAMS = 83
     PTP = 84
+    CP_PARAMS = 90
+    CP = 91
+    ARC_PARAMS = 100
     WAIT = 110
+    IO_MULTIPLEXING = 130
+    IO_DO = 131
+    IO_PWM = 132
+    IO_DI = 133
+    IO_ADC = 134
+    E_MOTOR = 135
     QUEUE_START = 240
     QUEUE_STOP = 241
     QUEUE_FORCE_STOP = 242
     QUEUE_CLEAR = 245
     QUEUE_CURRENT_INDEX = 246
+    QUEUE_LEFT_SPACE = 247
+
+
+@dataclass(frozen=True)
+class CommandLayout:
+    """
+    Parameter sizes of one command, as the protocol's structures define them [bytes].
+
+    ``write``: the accepted sizes of a write's parameters (None: any, e.g. a string);
+    ``read``: the size of the reply to a read (None: any); ``request``: the size of a read's
+    own parameters (the EIO reads name their address); ``queueable``: may be queued.
+    """
+
+    write: tuple = (0,)
+    read: int = 0
+    request: int = 0
+    queueable: bool = False
+
+
+# The Dobot Magician communication protocol's commands and their structures (DobotDll's
+# tagXxx types), enough to frame every request and to tell a reply of the wrong size.
+C = CommandId
+LAYOUTS = {
+    C.DEVICE_SN: CommandLayout(write=None, read=None),
+    C.DEVICE_NAME: CommandLayout(write=None, read=None),
+    C.DEVICE_VERSION: CommandLayout(write=(), read=3),
+    C.DEVICE_TIME: CommandLayout(write=(), read=4),
+    C.GET_POSE: CommandLayout(write=(), read=32),
+    C.RESET_POSE: CommandLayout(write=(9,), read=0),
+    C.ALARMS: CommandLayout(write=(0,), read=None),     # 16 bytes here; clients take any
+    C.HOME_PARAMS: CommandLayout(write=(16,), read=16, queueable=True),
+    C.HOME: CommandLayout(write=(0, 4), read=0, queueable=True),   # u32 reserved, optional
+    C.ARM_ORIENTATION: CommandLayout(write=(1,), read=1, queueable=True),
+    C.END_EFFECTOR_PARAMS: CommandLayout(write=(12,), read=12, queueable=True),
+    C.END_EFFECTOR_LASER: CommandLayout(write=(2,), read=2, queueable=True),
+    C.END_EFFECTOR_SUCTION_CUP: CommandLayout(write=(2,), read=2, queueable=True),
+    C.END_EFFECTOR_GRIPPER: CommandLayout(write=(2,), read=2, queueable=True),
+    C.JOG_JOINT_PARAMS: CommandLayout(write=(32,), read=32, queueable=True),
+    C.JOG_COORDINATE_PARAMS: CommandLayout(write=(32,), read=32, queueable=True),
+    C.JOG_COMMON_PARAMS: CommandLayout(write=(8,), read=8, queueable=True),
+    C.JOG: CommandLayout(write=(2,), read=0, queueable=True),
+    C.PTP_JOINT_PARAMS: CommandLayout(write=(32,), read=32, queueable=True),
+    C.PTP_COORDINATE_PARAMS: CommandLayout(write=(16,), read=16, queueable=True),
+    C.PTP_JUMP_PARAMS: CommandLayout(write=(8,), read=8, queueable=True),
+    C.PTP_COMMON_PARAMS: CommandLayout(write=(8,), read=8, queueable=True),
+    C.PTP: CommandLayout(write=(17,), read=0, queueable=True),
+    C.CP_PARAMS: CommandLayout(write=(13,), read=13, queueable=True),
+    # u8 mode + x, y, z, velocity; pydobot-style clients send the mode, x, y, z and one
+    # byte (14): the missing velocity reads as 0
+    C.CP: CommandLayout(write=(14, 17), read=0, queueable=True),
+    C.ARC_PARAMS: CommandLayout(write=(16,), read=16, queueable=True),
+    C.WAIT: CommandLayout(write=(4,), read=0, queueable=True),
+    C.IO_MULTIPLEXING: CommandLayout(write=(2,), read=2, request=1, queueable=True),
+    C.IO_DO: CommandLayout(write=(2,), read=2, request=1, queueable=True),
+    C.IO_PWM: CommandLayout(write=(9,), read=9, request=1, queueable=True),
+    C.IO_DI: CommandLayout(write=(), read=2, request=1),
+    C.IO_ADC: CommandLayout(write=(), read=3, request=1),
+    C.E_MOTOR: CommandLayout(write=(6,), read=0, queueable=True),
+    C.QUEUE_START: CommandLayout(),
+    C.QUEUE_STOP: CommandLayout(),
+    C.QUEUE_FORCE_STOP: CommandLayout(),
+    C.QUEUE_CLEAR: CommandLayout(),
+    C.QUEUE_CURRENT_INDEX: CommandLayout(write=(), read=8),
+    C.QUEUE_LEFT_SPACE: CommandLayout(write=(), read=4),
+}
+del C
+
+
+def reply_length(request):
+    """
+    Return the parameter bytes of the device's reply to `request` (None: any length).
+
+    A queued write is answered with its u64 queue index, any other write with no
+    parameters, a read with the command's structure (``LAYOUTS``).
+    """
+    if request.write:
+        return 8 if request.queued else 0
+    layout = LAYOUTS.get(request.command_id)
+    return None if layout is None else layout.read
+
+
+def reply_matches(reply, request):
+    """Whether `reply` can be the answer to `request`: same id and ctrl, right length."""
+    if not is_reply_to(reply, request):
+        return False
+    expected = reply_length(request)
+    return expected is None or len(reply.params) == expected
 
 
 class PtpMode(enum.IntEnum):
@@ -331,6 +442,7 @@ _POSE = _floats(8)
 _JOINT_PARAMS = _floats(8)
 _COORD_PARAMS = _floats(4)
 _COMMON_PARAMS = _floats(2)
+_JUMP_PARAMS = _floats(2)
 _PTP = struct.Struct('<B4f')
 _U32 = struct.Struct('<I')
 _U64 = struct.Struct('<Q')
@@ -354,6 +466,20 @@ def clear_alarms_request():
 def home_request(queued=True):
     """Build SetHOMECmd (id 31, write, queued): one reserved u32."""
     return Frame(CommandId.HOME, CTRL_WRITE | (CTRL_QUEUED if queued else 0), _U32.pack(0))
+
+
+def home_params_request(params=None, queued=False):
+    """Build SetHOMEParams (id 30, write: x, y, z, r [mm, deg]) or, with params None, the read."""
+    if params is None:
+        return Frame(CommandId.HOME_PARAMS)
+    return Frame(CommandId.HOME_PARAMS, CTRL_WRITE | (CTRL_QUEUED if queued else 0),
+                 _COORD_PARAMS.pack(*params))
+
+
+def ptp_jump_params_request(jump_height, max_jump_height, queued=False):
+    """Build SetPTPJumpParams (id 82, write): jump height and its limit [mm]."""
+    return Frame(CommandId.PTP_JUMP_PARAMS, CTRL_WRITE | (CTRL_QUEUED if queued else 0),
+                 _JUMP_PARAMS.pack(jump_height, max_jump_height))
 
 
 def ptp_joint_params_request(params=None, queued=False):
@@ -422,6 +548,11 @@ def queue_current_index_request():
     return Frame(CommandId.QUEUE_CURRENT_INDEX)
 
 
+def queue_left_space_request():
+    """Build GetQueuedCmdLeftSpace (id 247, read): reply u32 free places in the queue."""
+    return Frame(CommandId.QUEUE_LEFT_SPACE)
+
+
 # ---- parameter decoding (both directions, used by the client and the emulator) -------------
 
 def _unpack(layout, params, what):
@@ -474,6 +605,29 @@ def encode_index(index):
 def decode_index(params):
     """u64 queue index from reply parameter bytes (queued write or id 246)."""
     return _unpack(_U64, params, 'queue index')[0]
+
+
+def encode_u32(value):
+    """u32 parameter bytes (SetWAITCmd, GetQueuedCmdLeftSpace's reply)."""
+    return _U32.pack(value)
+
+
+def decode_u32(params):
+    """u32 from parameter bytes."""
+    return _unpack(_U32, params, 'u32')[0]
+
+
+def decode_home_params(params):
+    """Home position (x, y, z [mm], r [deg]) from the parameter bytes of id 30."""
+    return _unpack(_COORD_PARAMS, params, 'HOME params')
+
+
+def command_name(command_id):
+    """Return the protocol name of a command id (``PTP``), or ``command N`` for others."""
+    try:
+        return CommandId(command_id).name
+    except ValueError:
+        return f'command {command_id}'
 
 
 def is_reply_to(reply, request):

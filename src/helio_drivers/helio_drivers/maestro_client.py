@@ -44,20 +44,12 @@ class MaestroClient(SerialClient):
                     # Replies carry no channel number: one that comes after its timeout
                     # would be read as the answer to the next query (possibly another
                     # channel's), so it is waited out here and discarded.
-                    self._discard_late_reply()
+                    self._drain_late_replies()
             except PORT_FAILURES as error:
                 self._close_locked()
                 raise LinkError(f'{what}: link to {self.port} lost: {error}') from error
         raise DeviceTimeoutError(f'{what}: no {reply_length}-byte reply from {self.port} '
                                  f'within {self.timeout:.3f} s after {self.retries + 1} attempts')
-
-    def _discard_late_reply(self):
-        """Drop input until the line has been quiet for one reply timeout (bounded)."""
-        deadline = time.monotonic() + 10.0 * self.timeout
-        self._serial.timeout = self.timeout
-        while self._serial.read(64) and time.monotonic() < deadline:
-            pass
-        self._serial.reset_input_buffer()
 
     def _read(self, count, deadline):
         reply = b''

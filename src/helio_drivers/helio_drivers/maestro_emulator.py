@@ -5,9 +5,12 @@ Each channel's output pulse ramps from where it is to its target on a trapezoida
 limited by the channel's speed and acceleration settings (0 = unlimited, as on the device),
 following an injected clock (a callable returning seconds, wall or simulated). Targets
 outside a channel's [min, max] are clamped as the Maestro clamps them; a target of 0 turns
-the pulses off. Malformed input sets the serial protocol error bit, which Get Errors reports
-and clears. ``joint_positions()`` gives the servo angles through the configured
-``ServoCalibration``s so the simulated world can turn its lens.
+the pulses off. By default the emulator is a factory-new Maestro: every channel limited to
+992..2000 us and sending no pulses at start-up (Get Position answers 0) until its first
+target; a configured unit is ``MaestroEmulator(min_pulse_us=500, max_pulse_us=2500,
+initial_pulse_us=1500)``. Malformed input sets the serial protocol error bit, which Get
+Errors reports and clears. ``joint_positions()`` gives the servo angles through the
+configured ``ServoCalibration``s so the simulated world can turn its lens.
 """
 
 from dataclasses import dataclass
@@ -18,6 +21,14 @@ import time
 from helio_drivers import maestro_protocol as proto
 from helio_drivers.motion_profile import TrapezoidProfile
 from helio_drivers.pty_device import PtyDevice
+
+
+# A new Maestro's channel settings: Min 992 us, Max 2000 us, "Off" at start-up.
+FACTORY_MIN_US = 992.0
+FACTORY_MAX_US = 2000.0
+FACTORY_START_US = 0.0
+# A Maestro set up as the drivers' README says: Min 500 us, Max 2500 us, start at 1500 us.
+CONFIGURED_SETTINGS = {'min_pulse_us': 500.0, 'max_pulse_us': 2500.0, 'initial_pulse_us': 1500.0}
 
 
 @dataclass
@@ -45,9 +56,10 @@ class MaestroEmulator(PtyDevice):
     """A Maestro servo controller on a pty; see the module docstring."""
 
     def __init__(self, port_path=None, clock=time.monotonic, channel_count=6,
-                 calibrations=(), initial_pulse_us=1500.0, min_pulse_us=500.0,
-                 max_pulse_us=2500.0, seed=0, line_baudrate=None):
-        """Create `channel_count` channels at `initial_pulse_us`, limits in microseconds."""
+                 calibrations=(), initial_pulse_us=FACTORY_START_US,
+                 min_pulse_us=FACTORY_MIN_US, max_pulse_us=FACTORY_MAX_US, seed=0,
+                 line_baudrate=None):
+        """Create `channel_count` channels at `initial_pulse_us` (0: off), limits [us]."""
         self.clock = clock
         self.calibrations = {c.name: c for c in calibrations}
         self._lock = threading.RLock()

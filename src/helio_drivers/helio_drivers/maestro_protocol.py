@@ -216,7 +216,7 @@ class ServoCalibration:
     centre_pulse_us: float = 1500.0
     us_per_rad: float = 2000.0 / math.pi     # 180 deg over 500..2500 us
     direction: int = 1                       # +1 or -1
-    zero_offset_rad: float = 0.0             # joint angle at the centre pulse [rad]
+    zero_offset: float = 0.0             # joint angle at the centre pulse [rad]
 
     def __post_init__(self):
         """Check the calibration is usable."""
@@ -231,7 +231,7 @@ class ServoCalibration:
     def pulse_us(self, angle):
         """Pulse width [us] for a joint angle [rad]; ValueError naming the joint if outside."""
         pulse = self.centre_pulse_us + self.direction * self.us_per_rad * (
-            angle - self.zero_offset_rad)
+            angle - self.zero_offset)
         if not self.min_pulse_us - 1e-6 <= pulse <= self.max_pulse_us + 1e-6:
             low, high = sorted((self.angle(self.min_pulse_us), self.angle(self.max_pulse_us)))
             raise ValueError(
@@ -243,7 +243,7 @@ class ServoCalibration:
 
     def angle(self, pulse_us):
         """Joint angle [rad] for a pulse width [us]."""
-        return self.zero_offset_rad + self.direction * (
+        return self.zero_offset + self.direction * (
             pulse_us - self.centre_pulse_us) / self.us_per_rad
 
     def angle_range(self):

@@ -9,7 +9,8 @@ implement ``handle_input(data) -> list of reply bytes``.
 
 Faults are injected on replies (what the driver sees), as on a real noisy or hung link:
 dropped replies (no reply), corrupted last byte (a bad checksum), truncated replies
-(partial frames), garbage before a reply, delayed replies and randomly dropped bytes.
+(partial frames), garbage before a reply, delayed replies and randomly dropped bytes; and on
+the device itself: ``mute`` (acts, never answers) and ``deaf`` (hung: ignores everything).
 """
 
 from dataclasses import dataclass
@@ -32,7 +33,8 @@ class LinkFaults:
     garbage_replies: int = 0      # put random bytes before this many replies
     reply_delay_s: float = 0.0    # delay every reply by this long [s]
     byte_drop_rate: float = 0.0   # probability that any reply byte is lost [-]
-    mute: bool = False            # never answer (a hung device) until cleared
+    mute: bool = False            # never answer (input still acted on) until cleared
+    deaf: bool = False            # ignore all input and answer nothing (a hung device)
 
 
 class PtyDevice:
@@ -60,6 +62,7 @@ class PtyDevice:
         self._stop = threading.Event()
         self._wake_read, self._wake_write = os.pipe()
         self.bytes_received = 0
+        self.bytes_ignored = 0
         self.replies_sent = 0
         self._open_pty()
         self._thread = threading.Thread(target=self._run, name=f'{name}-emulator', daemon=True)
@@ -83,6 +86,7 @@ class PtyDevice:
         tty.setraw(master)
         os.set_blocking(master, False)
         temporary = self.port_path + '.new'
+        os.makedirs(os.path.dirname(os.path.abspath(self.port_path)), exist_ok=True)
         if os.path.lexists(temporary):
             os.unlink(temporary)
         os.symlink(os.ttyname(slave), temporary)
@@ -169,6 +173,9 @@ class PtyDevice:
             except OSError:
                 continue        # closed by disconnect() meanwhile
             if not data:
+                continue
+            if self.faults.deaf:
+                self.bytes_ignored += len(data)
                 continue
             self.bytes_received += len(data)
             for reply in self.handle_input(data):

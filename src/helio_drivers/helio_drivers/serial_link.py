@@ -4,8 +4,10 @@ What both pyserial clients share: errors, opening a port, the link state, reconn
 No rclpy here: the nodes use these to keep the link state and to decide when to retry.
 """
 
+import os
 import termios
 import threading
+import time
 
 import serial
 
@@ -26,6 +28,10 @@ class DeviceTimeoutError(DeviceError):
     """No valid reply arrived within the timeout, after every retry."""
 
 
+class PortBusyError(LinkError):
+    """The port exists but another process holds it (e.g. a second driver for the device)."""
+
+
 def open_serial(port, baudrate, reply_timeout):
     """
     Open `port` 8N1 with a short read timeout (the clients loop to their own deadline).
@@ -39,7 +45,116 @@ def open_serial(port, baudrate, reply_timeout):
         return serial.Serial(port, baudrate=baudrate, timeout=0.01,
                              write_timeout=max(1.0, 10.0 * reply_timeout), exclusive=True)
     except PORT_FAILURES + (ValueError,) as error:
+        if 'exclusively lock' in str(error):
+            holders = port_holders(port)
+            raise PortBusyError(
+                f'{port} is in use by '
+                + (', '.join(holders) if holders else 'another process')
+                + ': another program (a second driver?) holds this device') from error
         raise LinkError(f'cannot open {port}: {error}') from error
+
+
+def port_holders(port):
+    """
+    Describe the processes holding `port`'s lock ('pid N (command line)'), from /proc.
+
+    The exclusive open takes a flock on the device: /proc/locks names its owner by the
+    device's inode. Without such an entry, every process with the device open is named.
+    """
+    try:
+        status = os.stat(port)
+        target = os.path.realpath(port)
+    except OSError:
+        return []
+    inode = f'{os.major(status.st_dev):02x}:{os.minor(status.st_dev):02x}:{status.st_ino}'
+    pids = []
+    try:
+        with open('/proc/locks') as stream:
+            for line in stream:
+                fields = line.split()
+                if len(fields) > 5 and fields[1] == 'FLOCK' and fields[5] == inode:
+                    pids.append(int(fields[4]))
+    except (OSError, ValueError):
+        pass
+    if not pids:
+        for pid in (int(p) for p in os.listdir('/proc') if p.isdigit()):
+            try:
+                fds = os.listdir(f'/proc/{pid}/fd')
+                if any(os.path.realpath(f'/proc/{pid}/fd/{fd}') == target for fd in fds):
+                    pids.append(pid)
+            except OSError:
+                continue        # gone meanwhile, or not ours to look at
+    return [_process(pid) for pid in sorted(set(pids))]
+
+
+def _process(pid):
+    try:
+        with open(f'/proc/{pid}/cmdline', 'rb') as stream:
+            command = stream.read().replace(b'\0', b' ').decode(errors='replace').strip()
+    except OSError:
+        command = ''
+    return f'pid {pid} ({command[:120]})' if command else f'pid {pid}'
+
+
+AUTO_PORT = 'auto'
+
+
+def parse_usb_id(text):
+    """Return (vid, pid or None) of 'vvvv:pppp' or 'vvvv' (hexadecimal USB ids)."""
+    try:
+        parts = [int(part, 16) for part in str(text).split(':')]
+    except ValueError:
+        parts = []
+    if len(parts) not in (1, 2) or not all(0 <= part <= 0xFFFF for part in parts):
+        raise ValueError(f'USB id {text!r} is not "vvvv:pppp" or "vvvv" (hexadecimal)')
+    return parts[0], (parts[1] if len(parts) == 2 else None)
+
+
+def _describe(port):
+    ids = f'{port.vid:04x}:{port.pid:04x}' if port.vid is not None else 'no USB id'
+    text = f'{port.device} ({ids}'
+    if port.description and port.description != 'n/a':
+        text += f', {port.description}'
+    return text + ')'
+
+
+def _interface(port):
+    """Return the USB interface number ending a port's location ('1-1.2:1.0' -> 0)."""
+    location = port.location or ''
+    try:
+        return int(location.rsplit('.', 1)[1]) if ':' in location else 0
+    except (IndexError, ValueError):
+        return 0
+
+
+def find_port(usb_ids, what, ports=None):
+    """
+    Return the device path of the one serial port whose USB id is among `usb_ids`.
+
+    `usb_ids` are 'vvvv:pppp' or 'vvvv' strings; `ports` defaults to pyserial's
+    ``serial.tools.list_ports.comports()``. A device with several ports (one serial
+    number) gives its first interface. LinkError lists what was found when no port matches
+    and the candidates when several devices do.
+    """
+    wanted = [parse_usb_id(usb_id) for usb_id in usb_ids]
+    if ports is None:
+        from serial.tools import list_ports
+        ports = list_ports.comports()
+    ports = sorted(ports, key=lambda p: p.device)
+    matches = [p for p in ports if p.vid is not None and any(
+        p.vid == vid and (pid is None or p.pid == pid) for vid, pid in wanted)]
+    if not matches:
+        found = ', '.join(_describe(p) for p in ports) or 'no serial ports at all'
+        raise LinkError(f'port auto: no serial port with a USB id of {what} '
+                        f'({", ".join(usb_ids)}); found: {found}')
+    devices = {}
+    for port in matches:
+        devices.setdefault(port.serial_number or port.device, []).append(port)
+    if len(devices) > 1:
+        raise LinkError(f'port auto: {len(devices)} devices look like {what}: '
+                        + ', '.join(_describe(p) for p in matches)
+                        + '; set the parameter "port" to the one to use')
+    return min(next(iter(devices.values())), key=_interface).device
 
 
 class ReconnectBackoff:
@@ -92,6 +207,7 @@ class SerialClient:
         self._serial = None
         self._lock = threading.Lock()
         self.retried = 0            # requests sent again after a bad or missing reply
+        self.drained_bytes = 0      # late input dropped after a timeout or a retry
 
     @property
     def connected(self):
@@ -112,6 +228,28 @@ class SerialClient:
 
     def _on_open(self):
         """Reset per-link state after the port opened (called with the lock held)."""
+
+    def _drain_late_replies(self):
+        """
+        Read and drop input until the line has been quiet for one reply timeout.
+
+        Called (lock held) after a request timed out or was retried: the device may still
+        answer an attempt, and that late reply must never be read as the answer to the next
+        request. Bounded by (retries + 2) reply timeouts.
+        """
+        port = self._serial
+        deadline = time.monotonic() + (self.retries + 2) * self.timeout
+        quiet_since = time.monotonic()
+        while True:
+            now = time.monotonic()
+            if now - quiet_since >= self.timeout or now >= deadline:
+                break
+            port.timeout = min(self.timeout - (now - quiet_since), deadline - now, 0.05)
+            data = port.read(max(1, port.in_waiting))
+            if data:
+                self.drained_bytes += len(data)
+                quiet_since = time.monotonic()
+        port.reset_input_buffer()
 
     def _close_locked(self):
         if self._serial is not None:

@@ -4,31 +4,49 @@ Node servo_driver: the two wrist servos (lens yaw, lens pitch) on a Pololu Maest
 - action ``move_wrist`` (helio_msgs/MoveWrist): yaw and pitch [rad] are converted to pulse
   widths with each channel's calibration (``yaw.*``, ``pitch.*`` parameters, see
   config/servo_driver.yaml); an angle outside a channel's pulse range is refused naming the
-  joint. The goal succeeds when both reported positions are within
-  ``position_tolerance_us`` of their targets; feedback carries the current angles. Cancel
-  holds both servos where they are, and so does a move longer than ``move_timeout_s`` on the
-  node clock (or ``move_wall_timeout_s`` of wall time), which is aborted.
-- ``joint_states``: lens_yaw, lens_pitch [rad] at ``joint_state_rate_hz``.
-- ``servo/status`` (helio_msgs/DeviceStatus): link state, reconnect attempts, Maestro errors.
+  joint, and so is one beyond a limit the Maestro itself was found to impose. The goal
+  succeeds when both reported positions are within ``position_tolerance_us`` of their
+  targets; feedback carries the current angles. When the Maestro stops a servo short of
+  its target (its own channel range is narrower than the configured one: a factory-new
+  Maestro allows 992..2000 us), the goal aborts at once saying so, and the limit is
+  remembered. Cancel, a move longer than ``move_timeout`` on the node clock (or
+  ``move_wall_timeout`` of wall time) and every device error hold both servos where they
+  are, confirmed by reading them back, before the goal ends.
+- ``joint_states``: lens_yaw, lens_pitch [rad] at ``joint_state_rate``; a channel that sends
+  no pulses (a factory Maestro's start-up state: the servo is limp and its angle unknown) is
+  left out until its first move, never published as a bogus angle.
+- ``servo/status`` (helio_msgs/DeviceStatus): link state, reconnect attempts, Maestro errors,
+  and what is wrong with the device's set-up (pulses off, limits found).
 
-A lost port is reopened with exponential backoff while goals abort at once; on shutdown
-both servos are held at their current positions. The link, the device thread and the
-action plumbing are ``device_action_node.DeviceActionNode``'s.
+The action server exists only while the node has held its device once; a port held by
+another process makes the node refuse to start. A lost port is reopened with exponential
+backoff while goals abort at once; every connection and the shutdown hold both servos at
+their current positions. The link, the device thread and the action plumbing are
+``device_action_node.DeviceActionNode``'s.
 """
+
+import math
 
 from helio_drivers import maestro_protocol as proto
 from helio_drivers.device_action_node import (
     DeviceActionNode, DeviceSpec, GoalRefused, MoveProgress)
 from helio_drivers.maestro_client import MaestroClient
+from helio_drivers.serial_link import DeviceError
 from helio_msgs.action import MoveWrist
-from helio_optics.node_parameters import declare
-from helio_optics.node_runner import run_node
+from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.runner import run_node
 
 AXES = ('yaw', 'pitch')
 
+# Pololu Maestro 6, 12, 18 and 24 channels (each shows two ports: the first is the
+# command port)
+MAESTRO_USB_IDS = ('1ffb:0089', '1ffb:008a', '1ffb:008b', '1ffb:008c')
+
 SPEC = DeviceSpec(device='servo', label='servo controller', action_name='move_wrist',
-                  port='/dev/ttyACM0', baudrate_max=250000, timeout_s=0.1,
-                  move_timeout_s=10.0, move_timeout_max_s=600.0)
+                  port='/dev/ttyACM0', usb_ids=MAESTRO_USB_IDS, baudrate_max=250000,
+                  timeout=0.1, move_timeout=10.0, move_timeout_max=600.0)
+
+FACTORY_RANGE_US = (992.0, 2000.0)      # a new Maestro's channel limits (Min, Max)
 
 
 def declare_calibration(node, axis, joint_name, channel):
@@ -48,8 +66,8 @@ def declare_calibration(node, axis, joint_name, channel):
                            'Pulse width change per radian [us/rad].', 1.0, 10000.0),
         direction=declare(node, prefix + 'direction', 1,
                           'Sign between angle and pulse width (+1 or -1).', -1, 1),
-        zero_offset_rad=declare(node, prefix + 'zero_offset_rad', 0.0,
-                                'Joint angle at the centre pulse [rad].', -3.2, 3.2))
+        zero_offset=declare(node, prefix + 'zero_offset', 0.0,
+                            'Joint angle at the centre pulse [rad].', -3.2, 3.2))
     speed = declare(node, prefix + 'speed_us_per_s', 1000.0,
                     'Pulse-width speed limit [us/s] (0 = unlimited).', 0.0, 400000.0)
     acceleration = declare(node, prefix + 'acceleration_us_per_s2', 5000.0,
@@ -73,6 +91,7 @@ class ServoDriverNode(DeviceActionNode):
         channels = [c.channel for c, _, _ in self.axes.values()]
         if len(set(channels)) != len(channels):
             raise ValueError(f'yaw and pitch need different channels, got {channels}')
+        self.device_limits_qus = {}     # axis -> (low, high) the Maestro was seen to clamp to
         self.start_device()
 
     def _positions_qus(self):
@@ -80,33 +99,56 @@ class ServoDriverNode(DeviceActionNode):
                 for axis, (c, _, _) in self.axes.items()}
 
     def _angles(self, positions_qus):
-        return {axis: self.axes[axis][0].angle(q / 4.0) for axis, q in positions_qus.items()}
+        """Return the angle [rad] of each axis whose channel sends pulses (None if not)."""
+        return {axis: (self.axes[axis][0].angle(q / 4.0) if q else None)
+                for axis, q in positions_qus.items()}
 
     def _result(self, positions_qus):
-        angles = self._angles(positions_qus)
+        angles = self._known(self._angles(positions_qus))
         return MoveWrist.Result(achieved_yaw=angles['yaw'], achieved_pitch=angles['pitch'])
 
-    def _hold(self):
-        """Stop both servos where they are (target = current position); return positions."""
-        positions = self._positions_qus()
-        for axis, (calibration, _, _) in self.axes.items():
-            self.client.set_target(calibration.channel, positions[axis])
-        # Set Target has no reply: a query answered after it proves the device has it.
-        return self._positions_qus()
+    @staticmethod
+    def _known(angles):
+        """Angles for a message: NaN (unknown, never a made-up value) for a limp servo."""
+        return {axis: math.nan if angle is None else angle for axis, angle in angles.items()}
+
+    def _note(self, axis, text):
+        """Record (and log once) a problem with the device's set-up for one axis."""
+        if self.setup_notes.get(axis) != text:
+            self.setup_notes[axis] = text
+            self.get_logger().warning(text)
 
     # ---- device hooks -----------------------------------------------------------------------
 
     def configure_device(self):
-        """Set each channel's speed and acceleration limits; check the Maestro answers."""
-        for calibration, speed, acceleration in self.axes.values():
+        """Hold the servos, set speed and acceleration limits, check the Maestro's state."""
+        self.client.get_errors()          # the device answers (and stale errors go)
+        _, done = self.stop_device()
+        self.get_logger().info(f'on connect: {done}')
+        for axis, (calibration, speed, acceleration) in self.axes.items():
             self.client.set_speed(calibration.channel, speed)
             self.client.set_acceleration(calibration.channel, acceleration)
-        self.client.get_errors()          # the device answers (and stale errors go)
+        for axis, position in self._positions_qus().items():
+            calibration = self.axes[axis][0]
+            if position == 0:
+                self._note(axis, (
+                    f'{calibration.name} (Maestro channel {calibration.channel}) sends no '
+                    'pulses: the servo is limp and its angle unknown until its first move '
+                    '(a factory-new Maestro starts so; see the README, "Setting up the '
+                    'Maestro")'))
+            elif not calibration.min_pulse_us <= position / 4.0 <= calibration.max_pulse_us:
+                self._note(axis, (
+                    f'{calibration.name} starts at {position / 4.0:.1f} us, outside its '
+                    f'configured {calibration.min_pulse_us:.0f}..'
+                    f'{calibration.max_pulse_us:.0f} us'))
+            else:
+                self.setup_notes.pop(axis, None)
 
     def read_joints(self):
-        """Return the joint names and the yaw, pitch angles [rad]."""
+        """Return the names and angles [rad] of the servos whose position is known."""
         angles = self._angles(self._positions_qus())
-        return [self.axes[axis][0].name for axis in AXES], [angles[axis] for axis in AXES]
+        known = [axis for axis in AXES if angles[axis] is not None]
+        return [self.axes[axis][0].name for axis in known], [angles[axis] for axis in known]
 
     def read_alarms(self):
         """Return (and clear) the Maestro's error bits by name, logging any."""
@@ -116,11 +158,22 @@ class ServoDriverNode(DeviceActionNode):
         return errors
 
     def plan_move(self, goal):
-        """Return each axis's target [quarter-us]; an angle out of range names the joint."""
-        try:
-            return {axis: self.axes[axis][0].quarter_us(getattr(goal, axis)) for axis in AXES}
-        except ValueError as error:
-            raise GoalRefused(f'wrist target refused: {error}') from error
+        """Return each axis's target [quarter-us]; refuse angles out of range, naming why."""
+        plan = {}
+        for axis in AXES:
+            calibration = self.axes[axis][0]
+            try:
+                target = calibration.quarter_us(getattr(goal, axis))
+            except ValueError as error:
+                raise GoalRefused(f'wrist target refused: {error}') from error
+            low, high = self.device_limits_qus.get(axis, (0, 1 << 14))
+            if not low <= target <= high:
+                raise GoalRefused(
+                    f'wrist target refused: {calibration.name} needs {target / 4.0:.1f} us, '
+                    f'beyond the {low / 4.0:.1f}..{high / 4.0:.1f} us the Maestro allows on '
+                    f'channel {calibration.channel} ({self.setup_notes.get(axis, "")})')
+            plan[axis] = target
+        return plan
 
     def start_move(self, plan):
         """Set both targets."""
@@ -129,22 +182,60 @@ class ServoDriverNode(DeviceActionNode):
         return plan
 
     def poll_move(self, move):
-        """Done when both read-back positions are within the tolerance of their targets."""
+        """
+        Done when both read-back positions are within the tolerance of their targets.
+
+        A Maestro that has stopped (Get Moving State 0) short of a target clamped it to its
+        own channel range: the move fails at once, naming the limit, which is remembered.
+        The moving state is read before the positions: a servo that stopped before the
+        positions were read cannot have moved since (read after, a servo arriving between
+        the two reads would look stopped short of its target).
+        """
+        moving = self.client.moving()
         positions = self._positions_qus()
-        if all(abs(positions[a] - move[a]) <= self.tolerance_qus for a in move):
+        short = [a for a in move if abs(positions[a] - move[a]) > self.tolerance_qus]
+        if not short:
             return MoveProgress(done=True, success=True, message='wrist at target',
                                 result=self._result(positions))
-        angles = self._angles(positions)
+        if not moving:
+            return MoveProgress(done=True, result=self._result(positions),
+                                message='; '.join(self._clamped(a, positions[a], move[a])
+                                                  for a in short))
+        angles = self._known(self._angles(positions))
         return MoveProgress(feedback=MoveWrist.Feedback(current_yaw=angles['yaw'],
                                                         current_pitch=angles['pitch']))
 
-    def stop_move(self, move):
-        """Hold both servos where they are; return where that is."""
-        return self._result(self._hold()), 'servos held where they were'
+    def _clamped(self, axis, position, target):
+        """Remember the device limit a servo stopped at; return the explanation."""
+        calibration = self.axes[axis][0]
+        low, high = self.device_limits_qus.get(axis, (0, 1 << 14))
+        if target > position:
+            high = min(high, position)
+        else:
+            low = max(low, position)
+        self.device_limits_qus[axis] = (low, high)
+        factory = ' (a factory-new Maestro allows {:.0f}..{:.0f} us)'.format(*FACTORY_RANGE_US)
+        text = (f'{calibration.name}: the Maestro stopped at {position / 4.0:.1f} us, short of '
+                f'the target {target / 4.0:.1f} us: its channel {calibration.channel} range is '
+                f'narrower than the configured {calibration.min_pulse_us:.0f}..'
+                f'{calibration.max_pulse_us:.0f} us{factory}; set the channel' "'s Min and Max in "
+                'the Maestro Control Center (README, "Setting up the Maestro") or narrow '
+                f'{axis}.min_pulse_us / {axis}.max_pulse_us')
+        self._note(axis, text)
+        return text
 
     def stop_device(self):
-        """Leave the servos stopped: hold them at their current positions."""
-        self._hold()
+        """Hold both servos where they are (target = current position), confirmed."""
+        positions = self._positions_qus()
+        for axis, (calibration, _, _) in self.axes.items():
+            self.client.set_target(calibration.channel, positions[axis])
+        # Set Target has no reply: reading the positions back proves the device has it.
+        held = self._positions_qus()
+        drift = {a: abs(held[a] - positions[a]) for a in held}
+        if any(d > self.tolerance_qus for d in drift.values()):
+            raise DeviceError('servos still move after the hold: ' + ', '.join(
+                f'{self.axes[a][0].name} {d / 4.0:.2f} us' for a, d in drift.items()))
+        return self._result(held), 'servos held where they were (confirmed)'
 
 
 def main(args=None):

@@ -8,7 +8,7 @@ from helio_drivers import bench
 def test_bench_writes_flat_json(tmp_path):
     path = tmp_path / 'bench.json'
     assert bench.main(['--samples', '30', '--poll-seconds', '0.1', '--skip-node',
-                       '--skip-sim', '--json', str(path)]) == 0
+                       '--json', str(path)]) == 0
     figures = json.loads(path.read_text())
     for key in ('dobot_roundtrip_ms_median', 'dobot_roundtrip_ms_p99', 'dobot_pose_poll_hz',
                 'maestro_roundtrip_ms_median', 'client_move_motion_s_mean'):

@@ -1,5 +1,6 @@
 """pyserial clients against the emulators over real ptys: moves, limits, faults, unplug."""
 
+import contextlib
 import math
 import threading
 import time
@@ -9,6 +10,7 @@ from helio_drivers import maestro_protocol as mproto
 from helio_drivers.dobot_client import DobotClient, pose_to_si, target_to_protocol
 from helio_drivers.dobot_emulator import DobotEmulator
 from helio_drivers.maestro_client import MaestroClient
+from helio_drivers.maestro_emulator import CONFIGURED_SETTINGS as CONFIGURED
 from helio_drivers.maestro_emulator import MaestroEmulator
 from helio_drivers.serial_link import DeviceTimeoutError, LinkError, ReconnectBackoff
 from helio_optics.arm_kinematics import DobotArm, UnreachableError
@@ -17,18 +19,26 @@ import pytest
 FAST_JOINTS = proto.PtpJointParams((300.0,) * 4, (1000.0,) * 4)
 
 
-@pytest.fixture
-def dobot():
+@contextlib.contextmanager
+def dobot_client(retries, joint_params=FAST_JOINTS):
+    """Yield (emulator, connected DobotClient with 0.1 s timeouts and `retries`)."""
     emulator = DobotEmulator()
-    client = DobotClient(emulator.port_path, timeout=0.1, retries=2)
-    client.connect()
-    client.set_ptp_joint_params(FAST_JOINTS)
-    client.set_ptp_coordinate_params(proto.PtpCoordinateParams(500.0, 300.0, 2000.0, 1000.0))
+    client = DobotClient(emulator.port_path, timeout=0.1, retries=retries)
     try:
+        client.connect()
+        client.set_ptp_joint_params(joint_params)
+        client.set_ptp_coordinate_params(
+            proto.PtpCoordinateParams(500.0, 300.0, 2000.0, 1000.0))
         yield emulator, client
     finally:
         client.close()
         emulator.close()
+
+
+@pytest.fixture
+def dobot():
+    with dobot_client(retries=2) as emulator_and_client:
+        yield emulator_and_client
 
 
 def test_homing_then_queued_moves_complete_in_order_at_the_asked_pose(dobot):
@@ -160,7 +170,7 @@ def test_backoff_doubles_and_caps():
 
 @pytest.fixture
 def maestro():
-    emulator = MaestroEmulator()
+    emulator = MaestroEmulator(**CONFIGURED)
     client = MaestroClient(emulator.port_path, timeout=0.1, retries=1)
     client.connect()
     try:
@@ -230,3 +240,81 @@ def test_delayed_replies_within_the_timeout_are_waited_for_and_late_ones_retried
     with pytest.raises(DeviceTimeoutError, match='ALARMS'):
         client.get_alarms()
     emulator.clear_faults()
+
+
+@pytest.fixture
+def dobot_one_retry():
+    with dobot_client(1, proto.PtpJointParams((100.0,) * 4, (400.0,) * 4)) as emulator_and_client:
+        yield emulator_and_client
+
+
+def test_a_reply_after_the_retry_budget_never_answers_the_next_request(dobot_one_retry):
+    # Issue 17, item 2: every reply 0.25 s late, after both attempts (2 x 0.1 s) gave up.
+    # The late replies must not become the answers of the next PTP: its index is the one
+    # the device gave it, and waiting for it ends only with the arm at its target.
+    emulator, client = dobot_one_retry
+    emulator.inject(reply_delay_s=0.25)
+    with pytest.raises(DeviceTimeoutError, match='PTP'):
+        client.ptp(proto.PtpMode.MOVJ_ANGLE, (20.0, 10.0, 10.0, 0.0))
+    emulator.clear_faults()
+    target = (80.0, 10.0, 10.0, 0.0)
+    index = client.ptp(proto.PtpMode.MOVJ_ANGLE, target)
+    assert index == emulator.last_queued_index
+    assert client.wait_for_index(index, timeout=5.0)
+    assert emulator.joint_positions_deg() == pytest.approx(target, abs=1e-4)
+    assert client.settles >= 1
+
+
+def test_a_reply_of_the_wrong_size_is_not_taken_for_the_answer(dobot_one_retry):
+    # Issue 17, item 3: right id and ctrl, one parameter byte short: not the reply.
+    emulator, client = dobot_one_retry
+    emulator.missize_replies(proto.CommandId.GET_POSE, 1)
+    pose = client.get_pose()
+    assert pose.joints == pytest.approx(tuple(emulator.joint_positions_deg()), abs=1e-4)
+    assert client.mismatched_replies == 1 and client.retried == 1
+    emulator.missize_replies(proto.CommandId.QUEUE_CURRENT_INDEX, 2)
+    with pytest.raises(DeviceTimeoutError, match='QUEUE_CURRENT_INDEX'):
+        client.executed_index()          # a device error, not a ValueError from decoding
+
+
+def test_a_repeated_queue_index_is_a_stale_reply():
+    # A queued write's reply repeating an index already given is a late duplicate.
+    request = proto.ptp_request(proto.PtpCommand(4, 0.0, 0.0, 0.0, 0.0))
+    reply = proto.Frame(request.command_id, request.ctrl, proto.encode_index(5))
+    assert proto.reply_matches(reply, request)
+    assert not proto.reply_matches(proto.Frame(request.command_id, request.ctrl, b'\x05'),
+                                   request)
+    with DobotEmulator() as emulator:
+        client = DobotClient(emulator.port_path, timeout=0.1, retries=0)
+        client.connect()
+        try:
+            first = client.wait(1)
+            client._last_queue_index = first + 1      # as if a later index had been given
+            with pytest.raises(DeviceTimeoutError):
+                client.wait(1)                        # the device answers first + 1: stale
+            assert client.stale_replies == 1
+        finally:
+            client.close()
+
+
+def test_find_port_picks_the_device_by_usb_id_and_says_what_it_found():
+    from serial.tools.list_ports_common import ListPortInfo
+    from helio_drivers.serial_link import find_port
+
+    def port(device, vid=None, pid=None, serial_number=None, location=None):
+        info = ListPortInfo(device, skip_link_detection=True)
+        info.vid, info.pid, info.serial_number, info.location = vid, pid, serial_number, location
+        return info
+    dobot = port('/dev/ttyUSB3', 0x10C4, 0xEA60, 'A1')
+    maestro = [port('/dev/ttyACM1', 0x1FFB, 0x0089, 'M1', '1-1.2:1.2'),
+               port('/dev/ttyACM0', 0x1FFB, 0x0089, 'M1', '1-1.2:1.0')]
+    others = [port('/dev/ttyS0'), *maestro]
+    assert find_port(['10c4:ea60', '1a86:7523'], 'a dobot', [*others, dobot]) == '/dev/ttyUSB3'
+    assert find_port(['1ffb'], 'a maestro', others) == '/dev/ttyACM0'   # its command port
+    with pytest.raises(LinkError, match=r'no serial port.*found: /dev/ttyACM0 \(1ffb:0089.*'
+                                        r'/dev/ttyS0 \(no USB id\)'):
+        find_port(['10c4:ea60'], 'a dobot', others)
+    with pytest.raises(LinkError, match='2 devices look like a dobot.*set the parameter'):
+        find_port(['10c4:ea60'], 'a dobot', [dobot, port('/dev/ttyUSB0', 0x10C4, 0xEA60, 'B')])
+    with pytest.raises(ValueError, match='USB id'):
+        find_port(['10c4-ea60'], 'a dobot', others)

@@ -1,6 +1,6 @@
 """MoveDeadline: move limits on the node clock (sim time) with a wall-clock guard."""
 
-from helio_drivers.node_support import MoveDeadline
+from helio_drivers.device_support import MoveDeadline
 import pytest
 
 

@@ -4,6 +4,7 @@ import math
 
 from conftest import open_port, read_exactly
 from helio_drivers import maestro_protocol as proto
+from helio_drivers.maestro_emulator import CONFIGURED_SETTINGS as CONFIGURED
 from helio_drivers.maestro_emulator import MaestroEmulator
 import pytest
 
@@ -39,7 +40,7 @@ def test_parser_round_trips_and_flags_protocol_errors():
 def test_calibration_round_trips_and_refuses_out_of_range():
     calibration = proto.ServoCalibration('lens_yaw', 0, min_pulse_us=1000.0,
                                          max_pulse_us=2000.0, direction=-1,
-                                         zero_offset_rad=0.1)
+                                         zero_offset=0.1)
     # -1 direction: +0.2 rad from the zero offset is 0.2 * 2000/pi us below the centre
     assert calibration.pulse_us(0.3) == pytest.approx(1500.0 - 0.2 * 2000.0 / math.pi)
     for angle in (-0.5, 0.0, 0.1, 0.7):
@@ -55,7 +56,7 @@ def test_calibration_round_trips_and_refuses_out_of_range():
 @pytest.fixture
 def maestro(manual_clock):
     calibrations = [proto.ServoCalibration('lens_yaw', 0), proto.ServoCalibration('lens_pitch', 1)]
-    emulator = MaestroEmulator(clock=manual_clock, calibrations=calibrations)
+    emulator = MaestroEmulator(clock=manual_clock, calibrations=calibrations, **CONFIGURED)
     port = open_port(emulator.port_path, timeout=0.05)
     try:
         yield emulator, port, manual_clock

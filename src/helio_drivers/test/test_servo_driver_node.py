@@ -5,15 +5,16 @@ import threading
 import time
 
 from helio_drivers import maestro_protocol as proto
+from helio_drivers.maestro_emulator import CONFIGURED_SETTINGS as CONFIGURED
 from helio_drivers.maestro_emulator import MaestroEmulator
 from helio_drivers.servo_driver_node import ServoDriverNode
 from helio_msgs.action import MoveWrist
-from node_harness import driver_on, DriverGraph, SimClock, wait_for
+from node_harness import ClockPublisher, driver_on, DriverGraph
 import pytest
 
 # yaw reversed and offset, as a mounted servo may be; pitch on channel 3
 YAW = proto.ServoCalibration('lens_yaw', 0, min_pulse_us=700.0, max_pulse_us=2300.0,
-                             direction=-1, zero_offset_rad=0.1)
+                             direction=-1, zero_offset=0.1)
 PITCH = proto.ServoCalibration('lens_pitch', 3)
 
 
@@ -50,12 +51,12 @@ def clock():
 
 def wrist_parameters(emulator):
     """Return the driver parameters for the emulated wrist (fast, short timeouts)."""
-    return {'port': emulator.port_path, 'timeout_s': 0.1, 'retries': 1,
-            'joint_state_rate_hz': 50.0, 'status_period_s': 0.2,
-            'reconnect_initial_s': 0.05, 'reconnect_max_s': 0.2,
+    return {'port': emulator.port_path, 'timeout': 0.1, 'retries': 1,
+            'joint_state_rate': 50.0, 'status_period': 0.2,
+            'reconnect_initial': 0.05, 'reconnect_max': 0.2,
             'position_tolerance_us': 0.25,
             'yaw.channel': 0, 'yaw.min_pulse_us': 700.0, 'yaw.max_pulse_us': 2300.0,
-            'yaw.direction': -1, 'yaw.zero_offset_rad': 0.1,
+            'yaw.direction': -1, 'yaw.zero_offset': 0.1,
             'yaw.speed_us_per_s': 4000.0, 'yaw.acceleration_us_per_s2': 40000.0,
             'pitch.channel': 3, 'pitch.speed_us_per_s': 1000.0,
             'pitch.acceleration_us_per_s2': 40000.0}
@@ -71,7 +72,7 @@ def wrist_graph(**overrides):
 
 @pytest.fixture
 def wrist(clock):
-    emulator = MaestroEmulator(calibrations=[YAW, PITCH], clock=clock)
+    emulator = MaestroEmulator(calibrations=[YAW, PITCH], clock=clock, **CONFIGURED)
     with driver_on(emulator, wrist_graph()) as emulator_and_graph:
         yield emulator_and_graph
 
@@ -89,7 +90,7 @@ def test_wrist_moves_to_calibrated_angles(wrist):
     assert pulses[0] == pytest.approx(1500.0 - 0.3 * 2000.0 / math.pi, abs=0.25)
     assert pulses[3] == pytest.approx(1500.0 - 0.3 * 2000.0 / math.pi, abs=0.25)
     assert feedback, 'no feedback during the move'
-    assert graph.joint_states and graph.joint_states[-1].name == ['lens_yaw', 'lens_pitch']
+    assert graph.joint_states.wait_for_count(1)[-1].name == ['lens_yaw', 'lens_pitch']
     assert graph.wait_status(lambda s: s.connected and s.device == 'servo')
 
 
@@ -114,8 +115,8 @@ def test_cancel_holds_the_servos_mid_move(wrist, clock):
     assert started.wait(5.0)
     frozen_pitch = PITCH.angle(emulator.pulse_widths_us()[3])
     assert 0.1 < frozen_pitch < 1.4
-    wait_for(handle.cancel_goal_async())
-    response = wait_for(handle.get_result_async())
+    graph.cancel_goal(handle, 10.0)
+    response = graph.goal_result(handle, 10.0)
     clock.thaw()
     assert response.status == 5      # GoalStatus.STATUS_CANCELED
     # the new target is where the servo was when cancelled: it stops there, not at 1.5 rad
@@ -141,9 +142,10 @@ def test_unplug_aborts_and_reconnects(wrist):
 
 
 def test_a_stopped_sim_clock_cannot_hold_a_move_past_its_wall_clock_guard():
-    make_graph = wrist_graph(use_sim_time=True, move_timeout_s=1.0, move_wall_timeout_s=0.4)
-    with driver_on(MaestroEmulator(calibrations=[YAW, PITCH]), make_graph) as (emulator, graph):
-        clock = SimClock(graph.node, rate=0.0)        # /clock published, never advancing
+    make_graph = wrist_graph(use_sim_time=True, move_timeout=1.0, move_wall_timeout=0.4)
+    emulator = MaestroEmulator(calibrations=[YAW, PITCH], **CONFIGURED)
+    with driver_on(emulator, make_graph) as (emulator, graph):
+        clock = ClockPublisher(graph.node, rate=0.0)        # /clock published, never advancing
         try:
             started = time.monotonic()
             # pitch to 1.5 rad at 1000 us/s: 0.95 s of motion, longer than the 0.4 s guard
@@ -174,8 +176,66 @@ def test_an_unexpected_error_aborts_the_goal_holds_the_servos_and_the_driver_goe
     graph.driver.poll_move = failing_once
     response = graph.run(MoveWrist.Goal(yaw=0.1, pitch=1.5))
     assert not response.result.success
-    assert response.result.message == 'driver error, move aborted: injected bug'
+    # (the hold may take a second attempt: the servo moved on between reading and holding)
+    assert response.result.message.startswith('driver error, move aborted: injected bug; '
+                                              'servos held where they were (confirmed)')
     held = PITCH.angle(emulator.target_pulse_widths_us()[3])
     assert held < 1.4                       # held where it was, not left moving to 1.5
     response = graph.run(MoveWrist.Goal(yaw=0.0, pitch=0.2))
     assert response.result.success, response.result.message
+
+
+# ---- issue 17: a factory-new Maestro, a silent device ---------------------------------------
+
+def test_a_factory_maestro_shows_no_bogus_angle_and_its_limit_fails_fast_then_refuses():
+    # A new Maestro sends no pulses and limits each channel to 992..2000 us; the driver is
+    # configured for 500..2500 us (yaw 700..2300 us).
+    emulator = MaestroEmulator(calibrations=[YAW, PITCH])          # factory settings
+    with driver_on(emulator, wrist_graph()) as (emulator, graph):
+        assert graph.wait_status(lambda s: 'lens_pitch (Maestro channel 3) sends no pulses'
+                                 in s.message)
+        graph.statuses.wait_for_count(len(graph.statuses.messages) + 2)   # 0.4 s on
+        assert graph.joint_states.messages == []       # no angle while the servos are limp
+        # within the factory range: works, and the joints appear
+        response = graph.run(MoveWrist.Goal(yaw=0.1, pitch=0.5))          # pitch 1818 us
+        assert response.result.success, response.result.message
+        names = graph.joint_states.wait_for_message(lambda m: len(m.name) == 2).name
+        assert names == ['lens_yaw', 'lens_pitch']
+        # beyond it (pitch 1.2 rad = 2264 us): the device stops at 2000 us; no 10 s timeout
+        response, seconds = graph.timed_run(MoveWrist.Goal(yaw=0.1, pitch=1.2))
+        assert not response.result.success and seconds < 2.0
+        message = response.result.message
+        assert 'lens_pitch: the Maestro stopped at 2000.0 us, short of the target 2264.0 us' \
+            in message
+        assert 'factory-new Maestro allows 992..2000 us' in message and 'Min and Max' in message
+        assert emulator.pulse_widths_us()[3] == pytest.approx(2000.0)
+        # the limit is remembered: the next goal beyond it is refused before anything moves
+        before = emulator.target_pulse_widths_us()
+        response = graph.run(MoveWrist.Goal(yaw=0.1, pitch=1.0))          # 2137 us
+        assert not response.result.success
+        assert 'beyond the 0.0..2000.0 us the Maestro allows on channel 3' in \
+            response.result.message
+        assert emulator.target_pulse_widths_us() == before
+
+
+def test_a_device_silent_mid_move_aborts_and_holds_the_servos_when_it_answers(wrist, clock):
+    emulator, graph = wrist
+    started = threading.Event()
+
+    def on_feedback(message):
+        if message.feedback.current_pitch > 0.1:
+            clock.freeze()              # mid-move, however late the test reacts
+            emulator.inject(deaf=True)
+            started.set()
+    handle = graph.send(MoveWrist.Goal(yaw=0.1, pitch=1.5), feedback=on_feedback)
+    assert started.wait(5.0)
+    threading.Timer(0.4, emulator.clear_faults).start()    # the length of the fault
+    response = graph.goal_result(handle, 10.0)
+    clock.thaw()
+    assert not response.result.success
+    assert 'device error' in response.result.message
+    assert 'servos held where they were (confirmed)' in response.result.message
+    # the target is where the servo was (to the protocol's quarter microsecond), not 1.5 rad
+    target_us, position_us = emulator.target_pulse_widths_us()[3], emulator.pulse_widths_us()[3]
+    assert 0.1 < PITCH.angle(target_us) < 1.4
+    assert target_us == pytest.approx(position_us, abs=0.25)

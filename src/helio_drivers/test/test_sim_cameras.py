@@ -4,11 +4,12 @@ from dataclasses import replace
 import math
 
 import cv2
-from helio_drivers.sim_cameras import (celsius_to_centikelvin, centikelvin_to_celsius,
+from helio_drivers.sim.cameras import (celsius_to_centikelvin, centikelvin_to_celsius,
                                        RgbCamera, RgbSettings, ThermalCamera, ThermalSettings)
-from helio_drivers.sim_wood import WoodPanel
+from helio_drivers.sim.wood import WoodPanel
 from helio_optics.geometry import (intersect_plane, invert_transform, look_at,
                                    transform_points, transform_vectors)
+from helio_optics.ground_render import linear_to_srgb
 import numpy as np
 import pytest
 
@@ -58,7 +59,10 @@ def test_thermal_noise_has_the_asked_sigma_and_centikelvin_round_trips():
 
 
 def test_rgb_world_points_land_within_half_a_pixel_of_the_pinhole_projection():
-    settings = RgbSettings(noise_sigma=0.0, blur_sigma=0.5, supersample=2)
+    # a linear tone curve: OpenCV's sub-pixel corners assume one (on sRGB frames they move
+    # 0.6 px towards the dark side, which is what perception undoes)
+    settings = RgbSettings(read_noise=0.0, full_well_electrons=0.0, blur_sigma=0.5,
+                           supersample=2, tone_curve='linear')
     camera = RgbCamera((-0.04, 0.06, -0.04, 0.06), 2e-4, settings)
     T_world_camera = look_at([0.02, -0.07, 0.11], [0.0, 0.0, 0.0])
     image = camera.render(T_world_camera)
@@ -78,8 +82,13 @@ def test_rgb_world_points_land_within_half_a_pixel_of_the_pinhole_projection():
     assert np.all(error < 0.5)
 
 
+def noise_free(**changes):
+    """Return RgbSettings without sensor noise (and with `changes`)."""
+    return replace(RgbSettings(), read_noise=0.0, full_well_electrons=0.0, **changes)
+
+
 def test_char_darkens_the_rendered_wood_and_the_light_window_brightens_it():
-    settings = RgbSettings(noise_sigma=0.0, blur_sigma=0.0)
+    settings = noise_free(blur_sigma=0.0)
     camera = RgbCamera((-0.04, 0.06, -0.04, 0.06), 2e-4, settings, marker_side=0.0)
     pose = look_at([0.03, 0.03, 0.10], [0.03, 0.03, 0.0], up=(0.0, 1.0, 0.0))
     centre = tuple(int(v) for v in np.round(camera.camera.project(
@@ -90,9 +99,92 @@ def test_char_darkens_the_rendered_wood_and_the_light_window_brightens_it():
     camera.update_char(char, (340, 360, 340, 360))
     charred = camera.render(pose)[centre[1], centre[0]].astype(float)
     assert np.all(charred < 0.3 * bare)
-    relative = np.full((20, 20), 10.0, np.float32)
-    lit = camera.render(pose, (slice(340, 360), slice(340, 360), relative))
-    assert np.all(lit[centre[1], centre[0]] > 2.0 * charred)
+    lit = np.full((20, 20), 10.0, np.float32)
+    brighter = camera.render(pose, (slice(340, 360), slice(340, 360), lit))
+    assert np.all(brighter[centre[1], centre[0]] > 2.0 * charred)
     again = camera.render(pose)
     assert np.array_equal(again[centre[1], centre[0]], charred.astype(np.uint8))
     assert replace(settings, width=320).camera().width == 320
+
+
+def test_the_light_is_albedo_times_sky_plus_direct_sun_and_a_cloud_leaves_the_sky():
+    """
+    Linear light = exposure x albedo x (sky + attenuation x direct) / (1 + sky), then sRGB.
+
+    Issue 16's finding: a complete cloud made the frame black (the sky light was scaled
+    with the direct sun); the sky must stay.
+    """
+    settings = noise_free(blur_sigma=0.0, vignetting=0.0, adc_bits=16)
+    camera = RgbCamera((-0.04, 0.06, -0.04, 0.06), 2e-4, settings, marker_side=0.0)
+    pose = look_at([0.01, 0.01, 0.12], [0.01, 0.01, 0.0], up=(0.0, 1.0, 0.0))
+    centre = np.round(camera.camera.project(transform_points(
+        invert_transform(pose), [[0.01, 0.01, 0.0]]))[0]).astype(int)
+    albedo = camera._albedo.image[int(round((0.06 - 0.01) / 2e-4 - 0.5)),
+                                  int(round((0.01 + 0.04) / 2e-4 - 0.5))]
+    sky = settings.diffuse_fraction
+    for attenuation in (1.0, 0.3, 0.0):
+        pixel = camera.render(pose, attenuation=attenuation)[centre[1], centre[0]]
+        light = settings.exposure * albedo * (sky + attenuation) / (1 + sky)
+        expected = 255 * linear_to_srgb(light)
+        assert np.all(np.abs(pixel - expected) <= 1.5), (attenuation, pixel, expected)
+    clear = camera.render(pose, attenuation=1.0).astype(float).mean()
+    overcast = camera.render(pose, attenuation=0.0).astype(float).mean()
+    assert overcast > 0.3 * clear   # sky light only: 11 % of the light, 36 % in sRGB levels
+    # in the lens shadow (lit 0) only the sky is left
+    shade = np.zeros((10, 10), np.float32)
+    shaded = camera.render(pose, (slice(245, 255), slice(245, 255), shade), 1.0)
+    expected = 255 * linear_to_srgb(settings.exposure * albedo * sky / (1 + sky))
+    assert np.all(np.abs(shaded[centre[1], centre[0]] - expected) <= 1.5)
+
+
+def test_a_marker_under_a_complete_cloud_is_still_found_by_aruco():
+    camera = RgbCamera((-0.04, 0.06, -0.04, 0.06), 2e-4)
+    T_world_camera = look_at([0.02, -0.07, 0.11], [0.0, 0.0, 0.0])
+    for attenuation in (1.0, 0.0):
+        gray = cv2.cvtColor(camera.render(T_world_camera, attenuation=attenuation,
+                                          rng=np.random.default_rng(1)), cv2.COLOR_RGB2GRAY)
+        detector = cv2.aruco.ArucoDetector(
+            cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50),
+            cv2.aruco.DetectorParameters())
+        _, ids, _ = detector.detectMarkers(gray)
+        assert ids is not None and list(ids.ravel()) == [0], attenuation
+
+
+def test_kept_and_partly_redone_frames_equal_a_fresh_render():
+    """The frame light kept between frames, char regions and the window: all exact."""
+    extent = (-0.04, 0.06, -0.04, 0.06)
+    settings = noise_free(blur_sigma=0.9, vignetting=0.2, supersample=2, width=320, height=240)
+    kept = RgbCamera(extent, 2e-4, settings)
+    poses = [look_at([0.03, -0.04, 0.12], [0.02, 0.02, 0.0]),
+             look_at([0.031, -0.04, 0.12], [0.02, 0.02, 0.0])]
+    rows, cols = slice(280, 330), slice(290, 340)   # around (0.02, 0.02)
+    lit = np.ones((50, 50), np.float32)
+    lit[10:40, 10:40] = 0.0          # a shadow
+    lit[24:27, 24:27] = 300.0        # and a focus
+    char = np.zeros((500, 500))
+    light = (rows, cols, lit)   # one window object: the world keeps it until a re-trace
+    steps = [(poses[0], None, None, 1.0), (poses[0], light, None, 1.0),
+             (poses[0], light, (300, 306, 310, 318), 1.0),    # char inside the window
+             (poses[0], light, (300, 304, 300, 303), 1.0),
+             (poses[0], light, (260, 262, 200, 230), 0.4),    # outside it, and a cloud
+             (poses[1], light, (300, 310, 300, 318), 0.4),    # a move
+             (poses[1], (rows, cols, lit * 0.5), None, 0.4),  # a new window
+             (poses[1], None, None, 0.0)]
+    for pose, light, box, attenuation in steps:
+        if box is not None:
+            r0, r1, c0, c1 = box
+            char[r0:r1, c0:c1] = np.clip(char[r0:r1, c0:c1] + 0.6, 0, 1)
+            kept.update_char(char, box)
+        fresh = RgbCamera(extent, 2e-4, settings)
+        fresh.update_char(char, (0, 500, 0, 500))
+        frame = kept.render(pose, light, attenuation)
+        expected = fresh.render(pose, light, attenuation)
+        assert np.max(np.abs(frame.astype(int) - expected.astype(int))) <= 1
+        assert np.mean(frame != expected) < 1e-3
+    assert kept.renders['panel'] == 2 and kept.renders['panel_parts'] == 3
+    # the window was rendered whole only when it or the pose or the cloud changed
+    assert kept.renders['light'] == 4
+    # an unchanged scene is not rendered again: the sensor stage alone
+    before = dict(kept.renders)
+    kept.render(poses[1], None, 0.0)
+    assert kept.renders == {**before, 'frames': before['frames'] + 1}

@@ -4,8 +4,8 @@ import cv2
 from helio_drivers.dobot_client import DobotClient
 from helio_drivers.dobot_protocol import PtpMode
 from helio_drivers.maestro_client import MaestroClient
-from helio_drivers.sim_devices import DeviceSettings, SimDevices
-from helio_drivers.sim_world import SimWorld
+from helio_drivers.sim.devices import DeviceSettings, SimDevices
+from helio_drivers.sim.world import SimWorld
 from helio_optics.geometry import invert_transform, transform_points
 import numpy as np
 import pytest

@@ -2,7 +2,7 @@
 
 import math
 
-from helio_drivers.sim_flux import irradiance_on_cells, LensFlux, pmma_index
+from helio_drivers.sim.flux import irradiance_on_cells, LensFlux, pmma_index
 from helio_optics.geometry import homogeneous, rotation_y, unit
 from helio_optics.lens import LensParameters
 import numpy as np

@@ -3,15 +3,15 @@
 import datetime
 import math
 
-from helio_drivers.sim_clock import Pacer, SimClock
-from helio_drivers.sim_sun import CloudCover, CloudInterval, RandomClouds, Sun
+from helio_drivers.sim.clock import Pacer, SimClock
+from helio_drivers.sim.sun import CloudCover, CloudInterval, RandomClouds, Sun
 from helio_optics.ephemeris import Site
 from helio_optics.geometry import homogeneous, rotation_z
 import numpy as np
 from pysolar import solar
 import pytest
 
-SITE = Site(latitude_deg=48.137, longitude_deg=11.575, elevation_m=520.0)
+SITE = Site(latitude_deg=48.137, longitude_deg=11.575, elevation=520.0)
 CEST = datetime.timezone(datetime.timedelta(hours=2))
 START = datetime.datetime(2026, 6, 21, 9, 30, tzinfo=CEST)
 
@@ -19,11 +19,11 @@ START = datetime.datetime(2026, 6, 21, 9, 30, tzinfo=CEST)
 def pysolar_ray_enu(when):
     """Sun ray (east, north, up), computed directly from pysolar's altitude and azimuth."""
     altitude = math.radians(solar.get_altitude(SITE.latitude_deg, SITE.longitude_deg, when,
-                                               elevation=SITE.elevation_m,
-                                               temperature=SITE.temperature_c + 273.15,
-                                               pressure=SITE.pressure_pa))
+                                               elevation=SITE.elevation,
+                                               temperature=SITE.temperature + 273.15,
+                                               pressure=SITE.pressure))
     azimuth = math.radians(solar.get_azimuth(SITE.latitude_deg, SITE.longitude_deg, when,
-                                             elevation=SITE.elevation_m))
+                                             elevation=SITE.elevation))
     towards = np.array([math.sin(azimuth) * math.cos(altitude),
                         math.cos(azimuth) * math.cos(altitude), math.sin(altitude)])
     return -towards
@@ -110,7 +110,11 @@ def test_clock_advances_only_when_stepped_and_maps_to_dates():
     assert clock() == 0.0
     clock.advance(0.25)
     clock.advance(0.25)
-    assert clock() == 0.5 and clock.nanoseconds() == 500_000_000
+    assert clock() == 0.5
+    # /clock carries the absolute simulated instant (Unix epoch), for the Eq 18 ephemeris
+    epoch = datetime.datetime(1970, 1, 1, tzinfo=datetime.timezone.utc)
+    assert clock.nanoseconds() == (START - epoch) // datetime.timedelta(microseconds=1) * 1000 \
+        + 500_000_000
     assert clock.datetime() == START + datetime.timedelta(seconds=0.5)
     with pytest.raises(ValueError):
         clock.advance(0.0)

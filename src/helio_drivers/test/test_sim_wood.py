@@ -2,7 +2,7 @@
 
 import math
 
-from helio_drivers.sim_wood import GridParameters, WoodPanel, WoodParameters
+from helio_drivers.sim.wood import GridParameters, WoodPanel, WoodParameters
 import numpy as np
 import pytest
 

@@ -2,42 +2,27 @@
 
 from dataclasses import replace
 import math
-import os
 
 import cv2
-from helio_drivers.sim_world import settings_from_flat, SimSettings, SimWorld
-from helio_optics.geometry import transform_points
-from helio_optics.rig_kinematics import load_rig_parameters
+from helio_drivers.sim.truth import true_sun_focus_joints
+from helio_drivers.sim.world import settings_from_flat, SimSettings, SimWorld
+from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
 import numpy as np
 import pytest
 
-RIG_YAML = os.path.join(os.path.dirname(__file__), '..', '..', 'helio_optics', 'config',
-                        'rig.yaml')
-FAST = SimSettings(flux_rays=8000, step_s=0.1)
+RIG_YAML = default_rig_file()
+FAST = SimSettings(flux_rays=8000, step=0.1)
 
 
 def rig_parameters():
-    """Return the rig of helio_optics' config (source tree or installed share)."""
-    if os.path.exists(RIG_YAML):
-        return load_rig_parameters(RIG_YAML)
-    from ament_index_python.packages import get_package_share_directory
-    return load_rig_parameters(os.path.join(get_package_share_directory('helio_optics'),
-                                            'config', 'rig.yaml'))
-
-
-def focus_joints(world, target_world, d_lp=0.082):
-    """Joints focusing the TRUE sun on a world target (test shortcut, Eqs 14-15)."""
-    s0_robot = world.sun.ray_robot(world.clock.datetime())
-    target = transform_points(world.T_robot_world, target_world)
-    lens = world.rig.lens_pose_for_target(target, s0_robot, d_lp)
-    assert lens.x is not None, lens.reason
-    return lens.x
+    """Return the rig of the workspace's config/rig.yaml."""
+    return load_rig_parameters(RIG_YAML)
 
 
 def test_a_cloud_drops_the_flux_to_its_attenuation_within_one_step():
     settings = replace(FAST, cloud_schedule=(1.05, 3.0, 0.3))
     world = SimWorld(settings, rig_parameters())
-    world.set_joints(focus_joints(world, [0.06, 0.06, 0.0]))
+    world.set_joints(true_sun_focus_joints(world, [0.06, 0.06, 0.0], 0.082))
     powers = []
     for _ in range(12):
         world.step()
@@ -52,7 +37,7 @@ def test_the_world_is_deterministic_for_a_seed():
     images = []
     for _ in range(2):
         world = SimWorld(FAST, rig_parameters())
-        world.set_joints(focus_joints(world, [0.05, 0.07, 0.0]))
+        world.set_joints(true_sun_focus_joints(world, [0.05, 0.07, 0.0], 0.082))
         world.run(1.0)
         images.append((world.thermal_image(), world.rgb_image()))
     assert np.array_equal(images[0][0], images[1][0])
@@ -61,11 +46,11 @@ def test_the_world_is_deterministic_for_a_seed():
 
 def test_a_held_focus_chars_a_dot_written_to_the_canvas_outputs(tmp_path):
     world = SimWorld(FAST, rig_parameters())
-    world.set_joints(focus_joints(world, [0.07, 0.05, 0.0]))
+    world.set_joints(true_sun_focus_joints(world, [0.07, 0.05, 0.0], 0.082))
     world.step()
     spot = world.flux_field.centroid()
     world.run(12.0)
-    world.set_joints(focus_joints(world, [0.07, 0.05, 0.0], d_lp=0.112))  # retreat 3 cm
+    world.set_joints(true_sun_focus_joints(world, [0.07, 0.05, 0.0], 0.112))  # retreat 3 cm
     world.run(3.0)
     png, csv = world.write_outputs(str(tmp_path))
     assert np.array_equal(cv2.imread(png, cv2.IMREAD_UNCHANGED), world.canvas_image())

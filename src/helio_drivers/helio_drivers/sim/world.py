@@ -2,7 +2,7 @@
 The simulated world, without ROS: sun, lens flux, wood, cameras, clock and canvas (issue 6).
 
 ``SimWorld`` ties the parts together. Each ``step()`` advances the simulated clock by
-``step_s``, reads where the rig truly is (the hosted emulators, or any callable returning
+``step``, reads where the rig truly is (the hosted emulators, or any callable returning
 x in R^5), traces the sun through the lens at that pose (re-traced only when something moved),
 heats the wood and chars it. ``thermal_image()`` and ``rgb_image()`` render the cameras at
 their poses on the end effector; ``canvas_image()`` and ``charred_dots()`` give the painting
@@ -18,12 +18,12 @@ import math
 import os
 
 import cv2
-from helio_drivers.sim_cameras import (light_window, RgbCamera, RgbSettings, ThermalCamera,
+from helio_drivers.sim.cameras import (light_window, RgbCamera, RgbSettings, ThermalCamera,
                                        ThermalSettings)
-from helio_drivers.sim_clock import SimClock
-from helio_drivers.sim_flux import irradiance_on_cells, lens_pose_in_world, LensFlux
-from helio_drivers.sim_sun import CloudCover, RandomClouds, Sun
-from helio_drivers.sim_wood import GridParameters, WoodPanel, WoodParameters
+from helio_drivers.sim.clock import SimClock
+from helio_drivers.sim.flux import irradiance_on_cells, lens_pose_in_world, LensFlux
+from helio_drivers.sim.sun import CloudCover, RandomClouds, Sun
+from helio_drivers.sim.wood import GridParameters, WoodPanel, WoodParameters
 from helio_optics.ephemeris import Site
 from helio_optics.geometry import invert_transform
 from helio_optics.lens import LensParameters
@@ -37,17 +37,17 @@ class SimSettings:
 
     latitude_deg: float = 48.137
     longitude_deg: float = 11.575
-    elevation_m: float = 520.0
+    elevation: float = 520.0
     start_time: str = '2026-06-21T10:00:00+02:00'   # ISO 8601 with its UTC offset
     robot_heading_deg: float = 200.0     # hidden: compass azimuth of the robot's x axis
     dni: float = 900.0                   # clear-sky direct normal irradiance [W/m^2]
     cloud_schedule: tuple = ()           # flat (start_s, end_s, attenuation) triples
     random_clouds: bool = False
     cloud_seed: int = 0
-    cloud_mean_clear_s: float = 300.0
-    cloud_mean_cloudy_s: float = 30.0
+    cloud_mean_clear: float = 300.0
+    cloud_mean_cloudy: float = 30.0
     cloud_attenuation_range: tuple = (0.2, 0.7)
-    step_s: float = 0.1                  # simulated time per step [s]
+    step: float = 0.1                  # simulated time per step [s]
     seed: int = 0                        # camera noise
     lens: LensParameters = field(default_factory=lambda: LensParameters(
         focal_length=0.081, aperture_diameter=0.038, transmission=0.92))   # tuned
@@ -74,8 +74,8 @@ class SimSettings:
         """Return the CloudCover of the schedule and the optional random process."""
         process = None
         if self.random_clouds:
-            process = RandomClouds(seed=self.cloud_seed, mean_clear=self.cloud_mean_clear_s,
-                                   mean_cloudy=self.cloud_mean_cloudy_s,
+            process = RandomClouds(seed=self.cloud_seed, mean_clear=self.cloud_mean_clear,
+                                   mean_cloudy=self.cloud_mean_cloudy,
                                    attenuation_range=tuple(self.cloud_attenuation_range))
         return CloudCover.from_flat(self.cloud_schedule, process)
 
@@ -144,13 +144,13 @@ class SimWorld:
         """
         self.settings = settings or SimSettings()
         s = self.settings
-        if not s.step_s > 0.0:
-            raise ValueError(f'step_s must be > 0 s, got {s.step_s}')
+        if not s.step > 0.0:
+            raise ValueError(f'step must be > 0 s, got {s.step}')
         self.clock = SimClock(s.start_datetime())
         self.rig = Rig(rig_parameters or RigParameters())
         self.T_robot_world = self.rig.parameters.T_robot_world
         self.T_world_robot = invert_transform(self.T_robot_world)
-        self.site = Site(s.latitude_deg, s.longitude_deg, s.elevation_m)
+        self.site = Site(s.latitude_deg, s.longitude_deg, s.elevation)
         self.sun = Sun(self.site, math.radians(s.robot_heading_deg), s.dni, s.cloud_cover(),
                        self.T_robot_world)
         self.flux = LensFlux(s.lens, rays=s.flux_rays, seed=s.seed, beam_spread=s.beam_spread)
@@ -244,8 +244,8 @@ class SimWorld:
             self._irradiance_key = key
 
     def step(self):
-        """Advance the world by one step of ``step_s`` simulated seconds."""
-        dt = self.settings.step_s
+        """Advance the world by one step of ``step`` simulated seconds."""
+        dt = self.settings.step
         self.clock.advance(dt)
         self._refresh()
         self.panel.step(dt, self._dni * self._unit_irradiance,
@@ -279,11 +279,11 @@ class SimWorld:
             window = self._light_window(field)
             self._light = None if window is None else light_window(
                 field, self.panel.raster_shape, self.panel.raster_origin,
-                self.panel.grid.fine_cell, self.settings.rgb.diffuse_fraction, window)
+                self.panel.grid.fine_cell, window)
             self._light_key = self.flux.traces
         self.rgb.update_char(self.panel.char, self.panel.take_char_changes())
-        level = self._dni / max(self.sun.dni, 1e-9)
-        return self.rgb.render(T_world_rgb, self._light, level, self._rng)
+        attenuation = self._dni / max(self.sun.dni, 1e-9)   # clouds dim the direct sun only
+        return self.rgb.render(T_world_rgb, self._light, attenuation, self._rng)
 
     def _light_window(self, field):
         """Return the panel box holding the lens shadow and the focused spot."""

@@ -1,7 +1,7 @@
 """
 Benchmarks of the simulated world (issue 6): per-step costs and the real-time factor.
 
-    python -m helio_drivers.sim_bench --json PATH
+    python -m helio_drivers.sim.bench --json PATH
 
 Figures (flat JSON, units in the names):
 
@@ -24,9 +24,9 @@ import os
 import tempfile
 import time
 
-from helio_drivers.sim_calibration import aim
-from helio_drivers.sim_flux import irradiance_on_cells, lens_pose_in_world
-from helio_drivers.sim_world import SimSettings, SimWorld
+from helio_drivers.sim.flux import irradiance_on_cells, lens_pose_in_world
+from helio_drivers.sim.truth import true_sun_focus_joints
+from helio_drivers.sim.world import SimSettings, SimWorld
 from helio_optics.bench_report import add_json_option, median_call_ms, report
 from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
 from helio_optics.rig_kinematics import RigParameters
@@ -40,16 +40,16 @@ def _rig():
 def bench_costs(rig, repeats=30):
     """Return the per-step and per-frame costs [ms] of the world's parts."""
     world = SimWorld(SimSettings(), rig)
-    world.set_joints(aim(world, (0.07, 0.07, 0.0), 0.082))
+    world.set_joints(true_sun_focus_joints(world, (0.07, 0.07, 0.0), 0.082))
     world.run(2.0)
     figures = {}
     irradiance = world._dni * world._unit_irradiance
     figures['sim_heat_step_ms_median'] = median_call_ms(
-        lambda: world.panel.step(world.settings.step_s, irradiance, 900.0), repeats)
+        lambda: world.panel.step(world.settings.step, irradiance, 900.0), repeats)
     s0 = world.sun_ray_world()
     poses = [lens_pose_in_world(world.T_robot_world,
-                                world.rig.forward(aim(world, (0.07, 0.07 + 1e-3 * k, 0.0),
-                                                      0.082)).T_robot_lens)
+                                world.rig.forward(true_sun_focus_joints(
+                                    world, (0.07, 0.07 + 1e-3 * k, 0.0), 0.082)).T_robot_lens)
              for k in range(repeats)]
     fields = []
     figures['sim_flux_trace_ms_median'] = median_call_ms(
@@ -59,7 +59,7 @@ def bench_costs(rig, repeats=30):
                                     900.0), repeats)
     figures['sim_thermal_frame_ms_median'] = median_call_ms(world.thermal_image, repeats)
     figures['sim_rgb_frame_ms_median'] = median_call_ms(world.rgb_image, repeats)
-    world.set_joints(aim(world, (0.07, 0.07, 0.0), 0.082))
+    world.set_joints(true_sun_focus_joints(world, (0.07, 0.07, 0.0), 0.082))
     figures['sim_world_step_ms_median'] = median_call_ms(world.step, 4 * repeats)
     return figures
 
@@ -67,7 +67,7 @@ def bench_costs(rig, repeats=30):
 def bench_core_real_time_factor(rig, seconds=20.0, thermal_rate=8.7, rgb_rate=5.0):
     """Return the real-time factor of the world loop with both cameras rendering."""
     world = SimWorld(SimSettings(), rig)
-    world.set_joints(aim(world, (0.07, 0.07, 0.0), 0.082))
+    world.set_joints(true_sun_focus_joints(world, (0.07, 0.07, 0.0), 0.082))
     next_thermal = next_rgb = 0.0
     start = time.perf_counter()
     while world.time < seconds:
@@ -88,7 +88,7 @@ def bench_node_real_time_factor(rig_file, wall_seconds=15.0):
     from rclpy.parameter import Parameter
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import Image
-    from helio_drivers.sim_world_node import SimWorldNode
+    from helio_drivers.sim.world_node import SimWorldNode
 
     context = rclpy.context.Context()
     rclpy.init(context=context)

@@ -48,8 +48,14 @@ class SimClock:
         return self.start + datetime.timedelta(seconds=self())
 
     def nanoseconds(self):
-        """Return the simulated time as an integer count of ns (for /clock)."""
-        return int(round(self() * 1e9))
+        """
+        Return the simulated instant as ns since the Unix epoch (for /clock and stamps).
+
+        /clock carries the absolute simulated date and time, not the seconds since the start:
+        the sun estimator's Eq 18 update asks pysolar where the sun is at the node clock's
+        time, which must be the simulated day, not 1 January 1970.
+        """
+        return int(round(self.start.timestamp() * 1e9)) + int(round(self() * 1e9))
 
 
 class Pacer:

@@ -27,6 +27,10 @@ class DeviceSettings:
     pitch_channel: int = 1
     servo_us_per_rad: float = 2000.0 / math.pi
     servo_centre_us: float = 1500.0
+    # The Maestro as the drivers' README sets it up (Min 500, Max 2500 us, start at the
+    # centre), not a factory-new one (992..2000 us, pulses off).
+    servo_min_us: float = 500.0
+    servo_max_us: float = 2500.0
     initial_joints_deg: tuple = (0.0, 30.0, 30.0, 0.0)   # dobot j1..j4 [deg]
     # the servos start at their centre pulse: lens yaw = lens pitch = 0
 
@@ -48,7 +52,9 @@ class SimDevices:
         try:
             self.servo = MaestroEmulator(port_path=s.servo_port, clock=clock,
                                          calibrations=self.calibrations,
-                                         initial_pulse_us=s.servo_centre_us)
+                                         initial_pulse_us=s.servo_centre_us,
+                                         min_pulse_us=s.servo_min_us,
+                                         max_pulse_us=s.servo_max_us)
         except Exception:
             self.dobot.close()
             raise

@@ -3,44 +3,57 @@ Node sim_world: the simulated world (issue 6), the embedded default when there i
 
 It hosts the emulated Dobot and Maestro on pseudo-terminals (paths are parameters, logged at
 start) so that ``dobot_driver`` and ``servo_driver`` connect to them as to hardware, steps
-the world (``helio_drivers.sim_world.SimWorld``) on its own thread at ``real_time_factor``
+the world (``helio_drivers.sim.world.SimWorld``) on its own thread at ``real_time_factor``
 and publishes:
 
-- ``/clock`` (rosgraph_msgs/Clock): simulated time; run every other node with
+- ``/clock`` (rosgraph_msgs/Clock, global): simulated time; run every other node with
   ``use_sim_time:=true``;
-- ``/rgb/image_raw`` (rgb8, rendered only while someone subscribes) and ``/rgb/camera_info``
-  at ``rgb_rate_hz`` of simulated time; ``/thermal/image_raw`` (16UC1 centikelvin) and
-  ``/thermal/camera_info`` at ``thermal_rate_hz`` (sensor-data QoS);
-- ``/sim/canvas`` (mono8 top view of the char map, 255 bare wood) at ``canvas_rate_hz``.
+- ``rgb/image_raw`` (rgb8, rendered only while someone subscribes) and ``rgb/camera_info``
+  at ``rgb_rate`` of simulated time; ``thermal/image_raw`` (16UC1 centikelvin) and
+  ``thermal/camera_info`` at ``thermal_rate`` (sensor-data QoS);
+- ``sim/canvas`` (mono8 top view of the char map, 255 bare wood) at ``canvas_rate``;
+- the world's ground truth for tests and recordings, under ``sim/truth/`` (reliable,
+  transient local, every ``truth_period``): ``sun_direction`` (geometry_msgs/Vector3Stamped,
+  the true sun ray s0 in the robot frame), ``world_pose`` (geometry_msgs/PoseStamped, the
+  true T_robot_world) and ``spot_centre`` (geometry_msgs/PointStamped, world frame: the
+  power centre of the concentrated light on the panel, NaN when the lens focuses nothing);
+  ``rgb_pose`` (geometry_msgs/PoseStamped, world frame: the true pose of the rgb optical
+  frame, with each RGB image and its stamp).
+  No controller node subscribes to them: the controller must find the sun and the marker
+  itself (a test enforces that).
 
-At shutdown it writes ``canvas.png`` and ``dots.csv`` into ``output_dir`` (if set). The world's
-truth (sun, heading, lens focus) is published nowhere: the controller must find it.
+Topic names are relative, so the world runs under a namespace with its rig's nodes.
+At shutdown it writes ``canvas.png`` and ``dots.csv`` into ``output_dir`` (if set).
 """
 
 import threading
 import time
 
-from helio_drivers.sim_clock import Pacer
-from helio_drivers.sim_devices import DeviceSettings, SimDevices
-from helio_drivers.sim_world import flat_settings, settings_from_flat, SimSettings, SimWorld
-from helio_optics.node_parameters import declare
-from helio_optics.node_runner import run_node
-from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
-from helio_optics.rig_kinematics import RigParameters
-from helio_perception.image_conversion import numpy_to_image
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from geometry_msgs.msg import PointStamped, PoseStamped, Vector3, Vector3Stamped
+from helio_drivers.sim.clock import Pacer
+from helio_drivers.sim.devices import DeviceSettings, SimDevices
+from helio_drivers.sim.world import flat_settings, settings_from_flat, SimSettings, SimWorld
+from helio_optics.node_kit.conversions import array_to_point, camera_info_from_camera
+from helio_optics.node_kit.conversions import matrix_to_pose, numpy_to_image
+from helio_optics.node_kit.deployment import rig_file_or_default, RIG_FILE_PARAMETER
+from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.runner import run_node
+from helio_optics.rig_kinematics import load_rig_parameters
 import rclpy
 from rclpy.node import Node
-from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
+from rclpy.qos import ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
+
+TRUTH_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 # name: (description, minimum, maximum); ranges only for numbers.
 PARAMETER_DOCS = {
     'latitude_deg': ('site latitude, degrees north (pysolar)', -90.0, 90.0),
     'longitude_deg': ('site longitude, degrees east', -180.0, 360.0),
-    'elevation_m': ('site height above sea level [m]', -500.0, 9000.0),
+    'elevation': ('site height above sea level [m]', -500.0, 9000.0),
     'start_time': ('simulated start, ISO 8601 with UTC offset', None, None),
     'robot_heading_deg': ('HIDDEN truth: compass azimuth of the robot x axis, clockwise from '
                           'north [deg]; the estimator must find it', -360.0, 360.0),
@@ -49,10 +62,10 @@ PARAMETER_DOCS = {
                        None, None),
     'random_clouds': ('add the seeded random cloud process', None, None),
     'cloud_seed': ('seed of the random clouds', 0, 2 ** 31 - 1),
-    'cloud_mean_clear_s': ('mean clear spell of the random clouds [s]', 1.0, 1e6),
-    'cloud_mean_cloudy_s': ('mean cloudy spell of the random clouds [s]', 0.1, 1e6),
+    'cloud_mean_clear': ('mean clear spell of the random clouds [s]', 1.0, 1e6),
+    'cloud_mean_cloudy': ('mean cloudy spell of the random clouds [s]', 0.1, 1e6),
     'cloud_attenuation_range': ('DNI factor range of random clouds [min, max]', None, None),
-    'step_s': ('simulated time per world step [s]', 0.005, 0.5),
+    'step': ('simulated time per world step [s]', 0.005, 0.5),
     'seed': ('seed of the camera noise and ray sampling', 0, 2 ** 31 - 1),
     'lens.focal_length': ('world lens focal length f = r_s/(n-1) [m]', 0.02, 0.5),
     'lens.refractive_index': ('world lens index at 587.6 nm (design)', 1.01, 2.5),
@@ -100,10 +113,19 @@ PARAMETER_DOCS = {
     'rgb.height': ('RGB image height [px]', 16, 4096),
     'rgb.horizontal_fov': ('RGB horizontal field of view [rad]', 0.1, 3.0),
     'rgb.supersample': ('RGB sub-pixel rays per pixel side', 1, 8),
-    'rgb.sunlit_level': ('image level of sunlit wood relative to its albedo [-]', 0.01, 10.0),
-    'rgb.diffuse_fraction': ('sky light relative to the direct sun [-]', 0.0, 1.0),
-    'rgb.blur_sigma': ('RGB optical blur [px]', 0.0, 10.0),
-    'rgb.noise_sigma': ('RGB sensor noise [8-bit levels]', 0.0, 50.0),
+    'rgb.exposure': ("sunlit white paper's share of the RGB sensor's full scale, linear [-]",
+                     0.001, 100.0),
+    'rgb.diffuse_fraction': ('sky light relative to the clear direct sun; clouds leave it [-]',
+                             0.0, 1.0),
+    'rgb.blur_sigma': ('RGB optical blur, in linear light [px]', 0.0, 10.0),
+    'rgb.vignetting': ('RGB light lost at the image corners (cos^4 fall-off) [-]', 0.0, 0.95),
+    'rgb.read_noise': ('RGB read noise [fraction of full scale]', 0.0, 0.2),
+    'rgb.full_well_electrons': ('RGB full well: shot noise variance = signal / it (0: none) '
+                                '[electrons]', 0.0, 1e7),
+    'rgb.adc_bits': ('RGB linear read-out depth before the tone curve [bits]', 8, 16),
+    'rgb.tone_curve': ("RGB tone curve: 'srgb' (webcams) or 'linear' [-]", None, None),
+    'rgb.bayer': ('RGB through an RGGB Bayer mosaic and demosaicing [-]', None, None),
+    'rgb.jpeg_quality': ('RGB JPEG compression quality, 1-100 (0: none) [-]', 0, 100),
     'thermal.width': ('thermal image width [px]', 8, 2048),
     'thermal.height': ('thermal image height [px]', 8, 2048),
     'thermal.horizontal_fov': ('thermal horizontal field of view [rad]', 0.1, 3.0),
@@ -126,20 +148,23 @@ class SimWorldNode(Node):
         self.real_time_factor = declare(
             self, 'real_time_factor', 1.0,
             'simulated seconds per wall second (0: as fast as possible)', 0.0, 1000.0)
-        self.rgb_rate = declare(self, 'rgb_rate_hz', 5.0, 'RGB frame rate [Hz sim]', 0.0, 120.0)
-        self.thermal_rate = declare(self, 'thermal_rate_hz', 8.7,
+        self.rgb_rate = declare(self, 'rgb_rate', 5.0, 'RGB frame rate [Hz sim]', 0.0, 120.0)
+        self.thermal_rate = declare(self, 'thermal_rate', 8.7,
                                     'thermal frame rate [Hz sim]', 0.0, 120.0)
-        self.canvas_rate = declare(self, 'canvas_rate_hz', 0.5,
-                                   '/sim/canvas rate [Hz sim]', 0.0, 10.0)
+        self.canvas_rate = declare(self, 'canvas_rate', 0.5,
+                                   'sim/canvas rate [Hz sim]', 0.0, 10.0)
+        self.truth_period = declare(self, 'truth_period', 1.0,
+                                    'period of the sim/truth/* topics [s sim]', 0.01, 3600.0)
         self.output_dir = declare(self, 'output_dir', '',
-                                  'write canvas.png and dots.csv here at shutdown', None)
-        rig_file = declare(self, 'rig_file', '',
-                           "rig geometry YAML (empty: helio_optics' config/rig.yaml)", None)
+                                  'write canvas.png and dots.csv here at shutdown')
+        rig_file = rig_file_or_default(declare(
+            self, RIG_FILE_PARAMETER, '',
+            "the world's TRUE rig geometry YAML (empty: the workspace's config/rig.yaml)"))
         devices = DeviceSettings(
             dobot_port=declare(self, 'dobot_port', DeviceSettings.dobot_port,
-                               'pty symlink of the emulated Dobot', None),
+                               'pty symlink of the emulated Dobot'),
             servo_port=declare(self, 'servo_port', DeviceSettings.servo_port,
-                               'pty symlink of the emulated Maestro', None),
+                               'pty symlink of the emulated Maestro'),
             yaw_channel=declare(self, 'servo.yaw_channel', 0, 'Maestro channel of lens_yaw',
                                 0, 23),
             pitch_channel=declare(self, 'servo.pitch_channel', 1,
@@ -150,26 +175,34 @@ class SimWorldNode(Node):
                                     'servo pulse at joint angle 0 [us]', 500.0, 2500.0),
             initial_joints_deg=tuple(declare(
                 self, 'initial_joints_deg', list(DeviceSettings.initial_joints_deg),
-                'Dobot j1..j4 at start [deg]', None)))
-        self.world = SimWorld(self.settings, self._rig_parameters(rig_file))
+                'Dobot j1..j4 at start [deg]')))
+        self.world = SimWorld(self.settings, load_rig_parameters(rig_file))
         self.devices = SimDevices(self.world.clock, devices)
         self.world.attach_joint_source(self.devices.joint_positions)
         dobot_port, servo_port = self.devices.ports
         self.get_logger().info(
             f'emulated Dobot on {dobot_port} ({self.devices.dobot.device_name}), Maestro on '
             f'{servo_port} ({self.devices.servo.device_name}); real-time factor '
-            f'{self.real_time_factor:g}; step {self.settings.step_s:g} s')
+            f'{self.real_time_factor:g}; step {self.settings.step:g} s')
 
         self.clock_pub = self.create_publisher(Clock, '/clock', QoSProfile(depth=1))
-        self.rgb_pub = self.create_publisher(Image, '/rgb/image_raw', qos_profile_sensor_data)
-        self.rgb_info_pub = self.create_publisher(CameraInfo, '/rgb/camera_info',
+        self.rgb_pub = self.create_publisher(Image, 'rgb/image_raw', qos_profile_sensor_data)
+        self.rgb_info_pub = self.create_publisher(CameraInfo, 'rgb/camera_info',
                                                   qos_profile_sensor_data)
-        self.thermal_pub = self.create_publisher(Image, '/thermal/image_raw',
+        self.thermal_pub = self.create_publisher(Image, 'thermal/image_raw',
                                                  qos_profile_sensor_data)
-        self.thermal_info_pub = self.create_publisher(CameraInfo, '/thermal/camera_info',
+        self.thermal_info_pub = self.create_publisher(CameraInfo, 'thermal/camera_info',
                                                       qos_profile_sensor_data)
-        self.canvas_pub = self.create_publisher(Image, '/sim/canvas', QoSProfile(depth=1))
-        self._next = {'rgb': 0.0, 'thermal': 0.0, 'canvas': 0.0}
+        self.canvas_pub = self.create_publisher(Image, 'sim/canvas', QoSProfile(depth=1))
+        self.truth_sun_pub = self.create_publisher(Vector3Stamped, 'sim/truth/sun_direction',
+                                                   TRUTH_QOS)
+        self.truth_world_pub = self.create_publisher(PoseStamped, 'sim/truth/world_pose',
+                                                     TRUTH_QOS)
+        self.truth_spot_pub = self.create_publisher(PointStamped, 'sim/truth/spot_centre',
+                                                    TRUTH_QOS)
+        self.truth_rgb_pub = self.create_publisher(PoseStamped, 'sim/truth/rgb_pose',
+                                                   TRUTH_QOS)
+        self._next = {'rgb': 0.0, 'thermal': 0.0, 'canvas': 0.0, 'truth': 0.0}
         self._pacer = Pacer(self.real_time_factor)
         self._stop = threading.Event()
         self.achieved_real_time_factor = 0.0
@@ -179,21 +212,9 @@ class SimWorldNode(Node):
 
     def _declare(self, name, default):
         description, minimum, maximum = PARAMETER_DOCS.get(name, (name, None, None))
-        if isinstance(default, list):
-            descriptor = ParameterDescriptor(
-                description=description, type=ParameterType.PARAMETER_DOUBLE_ARRAY)
-            value = self.declare_parameter(name, Parameter.Type.DOUBLE_ARRAY, descriptor).value
-            return list(default) if value is None else [float(v) for v in value]
-        if isinstance(default, bool):
+        if isinstance(default, (list, bool, str)):
             return declare(self, name, default, description)
         return declare(self, name, default, description, minimum, maximum)
-
-    def _rig_parameters(self, rig_file):
-        rig_file = rig_file or default_rig_file()
-        if not rig_file:
-            self.get_logger().warn('no helio_optics config/rig.yaml found: default rig geometry')
-            return RigParameters()
-        return load_rig_parameters(rig_file)
 
     # ------------------------------------------------------------------ loop
     def _run(self):
@@ -234,33 +255,43 @@ class SimWorldNode(Node):
             image = numpy_to_image(self.world.thermal_image(), '16UC1')
             image.header.stamp, image.header.frame_id = stamp, 'thermal'
             self.thermal_pub.publish(image)
-            self.thermal_info_pub.publish(self._camera_info(self.world.thermal.camera, stamp,
-                                                            'thermal'))
+            self.thermal_info_pub.publish(camera_info_from_camera(self.world.thermal.camera,
+                                                                  stamp, 'thermal'))
         if self._due('rgb', self.rgb_rate):
             if self.rgb_pub.get_subscription_count() > 0:
                 image = numpy_to_image(self.world.rgb_image(), 'rgb8')
                 image.header.stamp, image.header.frame_id = stamp, 'rgb'
                 self.rgb_pub.publish(image)
-            self.rgb_info_pub.publish(self._camera_info(self.world.rgb.camera, stamp, 'rgb'))
+            self.rgb_info_pub.publish(camera_info_from_camera(self.world.rgb.camera, stamp,
+                                                              'rgb'))
+            truth = PoseStamped()
+            truth.header.stamp, truth.header.frame_id = stamp, 'world'
+            truth.pose = matrix_to_pose(self.world.camera_poses()[0])
+            self.truth_rgb_pub.publish(truth)
         if self._due('canvas', self.canvas_rate):
             image = numpy_to_image(self.world.canvas_image(), 'mono8')
             image.header.stamp, image.header.frame_id = stamp, 'world'
             self.canvas_pub.publish(image)
+        if self._due('truth', 1.0 / self.truth_period):
+            self._publish_truth(stamp)
 
-    @staticmethod
-    def _camera_info(camera, stamp, frame_id):
-        info = CameraInfo()
-        info.header.stamp, info.header.frame_id = stamp, frame_id
-        info.width, info.height = camera.width, camera.height
-        info.distortion_model = 'plumb_bob'
-        distortion = [float(v) for v in camera.distortion]
-        info.d = (distortion + [0.0] * 5)[:5]
-        info.k = [float(v) for v in camera.matrix.ravel()]
-        info.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
-        info.p = [float(camera.matrix[0, 0]), 0.0, float(camera.matrix[0, 2]), 0.0,
-                  0.0, float(camera.matrix[1, 1]), float(camera.matrix[1, 2]), 0.0,
-                  0.0, 0.0, 1.0, 0.0]
-        return info
+    def _publish_truth(self, stamp):
+        """Publish the true sun ray (robot frame) and the true T_robot_world."""
+        sun = Vector3Stamped()
+        sun.header.stamp, sun.header.frame_id = stamp, 'robot'
+        sun.vector = array_to_point(self.world.sun.ray_robot(self.world.clock.datetime()),
+                                    Vector3)
+        self.truth_sun_pub.publish(sun)
+        world = PoseStamped()
+        world.header.stamp, world.header.frame_id = stamp, 'robot'
+        world.pose = matrix_to_pose(self.world.T_robot_world)
+        self.truth_world_pub.publish(world)
+        spot = PointStamped()
+        spot.header.stamp, spot.header.frame_id = stamp, 'world'
+        field = self.world.flux_field
+        centre = None if field is None else field.centroid()
+        spot.point = array_to_point([float('nan')] * 3 if centre is None else [*centre, 0.0])
+        self.truth_spot_pub.publish(spot)
 
     def stop(self):
         """Stop stepping, write the outputs if asked, close the devices."""

@@ -1,0 +1,412 @@
+"""
+The simulated RGB and thermal cameras (issue 6, items 5-6).
+
+Both are rigid on the end effector (``helio_optics.rig_kinematics``: T_robot_rgb,
+T_robot_thermal) and look at the panel (world z = 0). Every pixel's ray is cast onto the
+panel by ``helio_optics.ground_render`` (one ray-plane implementation with
+``geometry.PinholeCamera``, distortion included).
+
+RGB: the panel texture (wood, ArUco marker, char darkening the wood; linear reflectance)
+lit by the sun: the light of a point is its albedo times the irradiance on it (the sky's
+diffuse light, which a cloud leaves, + the direct sun outside the lens shadow and the
+concentrated light from the ray tracer, both scaled by the cloud's attenuation), times the
+exposure; then a webcam's pipeline (`helio_optics.ground_render.Webcam`: blur and
+vignetting in linear light, read and shot noise, clipping, ADC, the sRGB tone curve,
+optionally a Bayer mosaic and JPEG). Sunlit white paper reads `exposure` of full scale; the
+focused spot saturates.
+
+The frame's light is kept between frames and redone only where something changed: the
+panel's light at the present pose (redone when the camera moves, and in the image region of
+each char change), scaled by the uniform daylight, plus the window of the lens shadow and
+the spot (rendered alone, over its own image region); an unchanged scene costs only the
+sensor stage.
+
+Thermal (FLIR Lepton 3.5 class): 160 x 120 pixels, each the panel surface temperature at the
+point its centre ray meets, plus Gaussian noise (NETD), read out capped at 180.9 degC
+(parameter), encoded 16UC1 in centikelvin.
+"""
+
+from dataclasses import dataclass
+import math
+
+import cv2
+from helio_optics.geometry import invert_transform, PinholeCamera, transform_points
+from helio_optics.ground_render import (decode_srgb8, GroundRenderer, GroundTexture,
+                                        make_panel_texture, WebcamSettings)
+import numpy as np
+
+KELVIN = 273.15
+CHAR_RGB = (38, 30, 26)     # 8-bit sRGB
+
+
+@dataclass(frozen=True)
+class RgbSettings:
+    """RGB camera: size [px], horizontal field of view [rad], exposure and webcam values."""
+
+    width: int = 640
+    height: int = 480
+    horizontal_fov: float = math.radians(70.0)
+    supersample: int = 1
+    exposure: float = 0.55          # sunlit white paper's share of full scale (linear) [-]
+    diffuse_fraction: float = 0.12  # sky light as a fraction of the clear direct sun [-]
+    blur_sigma: float = 0.7         # optical blur [px]
+    vignetting: float = 0.15        # light lost at the image corners [-]
+    read_noise: float = 0.002       # sensor read noise [fraction of full scale]
+    full_well_electrons: float = 6000.0   # shot noise (0: none)
+    adc_bits: int = 10              # linear read-out before the tone curve
+    tone_curve: str = 'srgb'        # 'srgb' or 'linear'
+    bayer: bool = False             # RGGB mosaic + demosaic
+    jpeg_quality: int = 0           # 0: no JPEG
+
+    def camera(self):
+        """Return the PinholeCamera of these settings."""
+        return PinholeCamera.from_fov(self.width, self.height, self.horizontal_fov)
+
+    def webcam(self, seed=0):
+        """Return the WebcamSettings of these settings (noise bank from `seed`)."""
+        return WebcamSettings(tone_curve=self.tone_curve, blur_sigma=self.blur_sigma,
+                              vignetting=self.vignetting, read_noise=self.read_noise,
+                              full_well_electrons=self.full_well_electrons,
+                              adc_bits=self.adc_bits, bayer=self.bayer,
+                              jpeg_quality=self.jpeg_quality, seed=seed)
+
+
+@dataclass(frozen=True)
+class ThermalSettings:
+    """Thermal camera: Lepton-like size, field of view, read-out cap and noise."""
+
+    width: int = 160
+    height: int = 120
+    horizontal_fov: float = math.radians(45.0)   # tuned footprint (Lepton 3.5: 57 deg)
+    cap: float = 180.9              # read-out upper limit [degC] (paper Sec. IV-B)
+    floor: float = -10.0            # read-out lower limit [degC]
+    noise_sigma: float = 0.05       # NETD [K]
+
+    def camera(self):
+        """Return the PinholeCamera of these settings."""
+        return PinholeCamera.from_fov(self.width, self.height, self.horizontal_fov)
+
+
+def celsius_to_centikelvin(temperature):
+    """Encode temperatures [degC] as uint16 centikelvin (the Lepton's radiometric format)."""
+    return np.clip(np.rint((np.asarray(temperature, float) + KELVIN) * 100.0),
+                   0, 65535).astype(np.uint16)
+
+
+def centikelvin_to_celsius(counts):
+    """Decode uint16 centikelvin to degC."""
+    return np.asarray(counts, float) / 100.0 - KELVIN
+
+
+class ThermalCamera:
+    """Renders the panel surface temperature as the thermal camera reads it."""
+
+    def __init__(self, settings=None):
+        """Cache the pixel-centre rays of the camera."""
+        self.settings = settings or ThermalSettings()
+        self.camera = self.settings.camera()
+        self._renderer = GroundRenderer(self.camera, supersample=1)
+
+    def temperatures(self, panel, T_world_camera, rng=None):
+        """Return the read-out [degC] per pixel: the field at pixel centres, noise, cap."""
+        x, y = self._renderer.ground_points(T_world_camera)
+        seen = np.isfinite(x)
+        field = np.full(x.shape, panel.wood.ambient)
+        field[seen] = panel.surface_temperature_at(x[seen], y[seen])
+        if self.settings.noise_sigma > 0.0:
+            rng = np.random.default_rng() if rng is None else rng
+            field = field + rng.normal(0.0, self.settings.noise_sigma, field.shape)
+        return np.clip(field, self.settings.floor, self.settings.cap)
+
+    def image(self, panel, T_world_camera, rng=None):
+        """Return the 16UC1 centikelvin read-out (H, W) as uint16."""
+        return celsius_to_centikelvin(self.temperatures(panel, T_world_camera, rng))
+
+
+class RgbCamera:
+    """Renders the lit panel, the marker, the char and the light spot as a webcam does."""
+
+    def __init__(self, panel_extent, pixel_size, settings=None, marker_side=0.04,
+                 marker_id=0, dictionary='DICT_4X4_50', seed=0):
+        """Build the panel's albedo texture (pixels aligned with the char raster)."""
+        self.settings = settings or RgbSettings()
+        self.camera = self.settings.camera()
+        self._renderer = GroundRenderer(self.camera, supersample=self.settings.supersample)
+        self._webcam = self._renderer.webcam(self.settings.webcam(seed + 7))
+        texture = make_panel_texture(extent=panel_extent, metres_per_pixel=pixel_size,
+                                     marker_side=marker_side, marker_id=marker_id,
+                                     dictionary=dictionary, seed=seed)
+        self.extent = tuple(panel_extent)
+        self.pixel_size = float(pixel_size)
+        self._wood = decode_srgb8(texture.image)          # linear; rows from y_max (top view)
+        self._albedo = GroundTexture(image=self._wood.copy(), extent=self.extent, linear=True)
+        self._char_rgb = decode_srgb8(np.array([CHAR_RGB], np.uint8))[0]
+        self._panel = None          # optics(light of the albedo) at `_panel_pose`
+        self._panel_pose = None
+        self._dirty = []            # albedo raster boxes changed since `_panel` was made
+        self._light_source = None   # the light window of the last frame
+        self._attenuation = None    # and its direct sun's share
+        self._window_rect = None    # image rectangle of the window's change to the light
+        self._window_term = None    # and that change
+        self._window_texture = None  # the window's change on the panel (albedo x change)
+        self._frame = None          # the last frame's light on the sensor
+        self._prepared = None       # and its noise-free sensor stage
+        self.renders = {'frames': 0, 'panel': 0, 'panel_parts': 0, 'light': 0}
+
+    def update_char(self, char, box=None):
+        """
+        Darken the albedo where the char raster (rows from y_min) changed.
+
+        `box` (r0, r1, c0, c1) limits the look to where the panel reported changes (None:
+        nothing changed).
+        """
+        if box is None:
+            return
+        r0, r1, c0, c1 = box
+        height = self._wood.shape[0]
+        chi = np.flipud(char[r0:r1, c0:c1]).astype(np.float32)[:, :, None]
+        top = slice(height - r1, height - r0)
+        self._albedo.image[top, c0:c1] = (self._wood[top, c0:c1] * (1.0 - chi)
+                                          + self._char_rgb * chi)
+        self._dirty.append((r0, r1, c0, c1))
+
+    def render(self, T_world_camera, light=None, attenuation=1.0, rng=None):
+        """
+        Return the RGB image (H, W, 3) uint8 at a camera pose.
+
+        The panel is lit by the sky (`diffuse_fraction` of the clear direct sun, whatever
+        the clouds) and by the direct sun times `attenuation` (its share of the clear-sky
+        value under clouds), except in `light` = (rows, cols, lit) from ``light_window``:
+        the direct sun there, relative to the clear direct sun on the panel (0 in the lens
+        shadow, far above 1 in the focus).
+        """
+        self.renders['frames'] += 1
+        pose = np.asarray(T_world_camera, dtype=np.float64).tobytes()
+        attenuation = float(attenuation)
+        whole = (pose != self._panel_pose or self._panel is None or self._frame is None
+                 or attenuation != self._attenuation)
+        parts = self._panel_light(T_world_camera, pose)
+        changed = [rect for _, rect in parts]
+        if light is not self._light_source or whole:
+            changed.append(self._window_rect)   # where the old window was
+            self._window(T_world_camera, light, attenuation)
+            changed.append(self._window_rect)
+        else:
+            self._window_update(T_world_camera, [box for box, _ in parts])
+        self._light_source, self._attenuation = light, attenuation
+        if whole:
+            self._compose((0, 0, self.camera.width, self.camera.height), prepare_all=True)
+        else:
+            for rect in _merged([rect for rect in changed if rect is not None]):
+                self._compose(rect)
+        return self._webcam.expose(self._prepared, rng)
+
+    def panel_light(self, light, attenuation=1.0):
+        """
+        Return (rows, cols, light (h, w, 3)): what each raster pixel of `light`'s window sends.
+
+        Linear, relative to the sensor's full scale before the lens (exposure x albedo x
+        irradiance): the ground truth of what the camera images there (for tests).
+        """
+        s = self.settings
+        rows, cols, lit = light
+        height = self._albedo.image.shape[0]
+        albedo = np.flipud(self._albedo.image[height - rows.stop:height - rows.start, cols])
+        irradiance = (s.diffuse_fraction + attenuation * lit) / (1.0 + s.diffuse_fraction)
+        return rows, cols, s.exposure * albedo * irradiance[:, :, None]
+
+    def _panel_light(self, T_world_camera, pose):
+        """
+        Keep the panel's light through the optics at a pose (albedo x 1) up to date.
+
+        Return the (raster box, image rectangle) of each part redone (none after a move:
+        the caller redoes all).
+        """
+        changed = []
+        if pose != self._panel_pose or self._panel is None:
+            self.renders['panel'] += 1
+            self._panel = self._webcam.optics(self._renderer.radiance(
+                T_world_camera, self._albedo, background=0.0))
+            self._panel_pose, self._dirty = pose, []
+        for r0, r1, c0, c1 in self._dirty:
+            rect = self._image_rect(T_world_camera, self._raster_box_world(r0, r1, c0, c1))
+            if rect is None:
+                continue
+            self.renders['panel_parts'] += 1
+            wide, inner = rect
+            part = self._webcam.optics(self._renderer.radiance(
+                T_world_camera, self._albedo, background=0.0, rect=wide), wide)
+            x0, y0, x1, y1 = inner
+            self._panel[y0:y1, x0:x1] = part[y0 - wide[1]:y1 - wide[1],
+                                             x0 - wide[0]:x1 - wide[0]]
+            changed.append(((r0, r1, c0, c1), inner))
+        self._dirty = []
+        return changed
+
+    def _window(self, T_world_camera, light, attenuation):
+        """Render the lens shadow and the focus's change to the light, over their region."""
+        self._window_rect = self._window_term = self._window_texture = None
+        if light is None or attenuation <= 0.0:
+            return
+        self.renders['light'] += 1
+        rows, cols, lit = light
+        box = self._raster_box_world(rows.start, rows.stop, cols.start, cols.stop)
+        rect = self._image_rect(T_world_camera, box)
+        if rect is None:
+            return
+        s = self.settings
+        self._window_change = np.flipud(lit)[:, :, None] - np.float32(1.0)   # rows from y_max
+        self._window_change *= np.float32(s.exposure * attenuation / (1.0 + s.diffuse_fraction))
+        self._window_rows, self._window_cols = rows, cols
+        height = self._albedo.image.shape[0]
+        patch = self._albedo.image[height - rows.stop:height - rows.start, cols]
+        self._window_texture = GroundTexture(image=patch * self._window_change, extent=box,
+                                             linear=True)
+        wide, inner = rect
+        term = self._webcam.optics(self._renderer.radiance(
+            T_world_camera, self._window_texture, background=0.0, rect=wide), wide)
+        x0, y0, x1, y1 = inner
+        self._window_rect = inner
+        self._window_term = term[y0 - wide[1]:y1 - wide[1], x0 - wide[0]:x1 - wide[0]].copy()
+
+    def _window_update(self, T_world_camera, boxes):
+        """Redo the window's change where char changed the albedo (raster `boxes`)."""
+        if self._window_texture is None:
+            return
+        rows, cols = self._window_rows, self._window_cols
+        height = self._albedo.image.shape[0]
+        for r0, r1, c0, c1 in boxes:
+            r0, r1 = max(r0, rows.start), min(r1, rows.stop)
+            c0, c1 = max(c0, cols.start), min(c1, cols.stop)
+            if r1 <= r0 or c1 <= c0:
+                continue
+            # texture rows run from y_max: raster rows r0..r1 are these
+            top, window_top = slice(height - r1, height - r0), slice(rows.stop - r1,
+                                                                     rows.stop - r0)
+            part = slice(c0 - cols.start, c1 - cols.start)
+            self._window_texture.image[window_top, part] = \
+                self._albedo.image[top, c0:c1] * self._window_change[window_top, part]
+            rect = self._image_rect(T_world_camera, self._raster_box_world(r0, r1, c0, c1))
+            inner = None if rect is None else _intersection(rect[1], self._window_rect)
+            if inner is None:
+                continue
+            wide = rect[0]
+            term = self._webcam.optics(self._renderer.radiance(
+                T_world_camera, self._window_texture, background=0.0, rect=wide), wide)
+            x0, y0, x1, y1 = inner
+            wx, wy = self._window_rect[:2]
+            self._window_term[y0 - wy:y1 - wy, x0 - wx:x1 - wx] = \
+                term[y0 - wide[1]:y1 - wide[1], x0 - wide[0]:x1 - wide[0]]
+
+    def _compose(self, rect, prepare_all=False):
+        """Redo the frame's light and its prepared sensor stage inside `rect` (x0, y0, x1, y1)."""
+        s = self.settings
+        uniform = (s.diffuse_fraction + self._attenuation) / (1.0 + s.diffuse_fraction)
+        if prepare_all:
+            self._frame = self._panel * np.float32(s.exposure * uniform)
+        else:
+            x0, y0, x1, y1 = rect
+            self._frame[y0:y1, x0:x1] = self._panel[y0:y1, x0:x1] * np.float32(
+                s.exposure * uniform)
+        if self._window_rect is not None:
+            both = _intersection(rect, self._window_rect)
+            if both is not None:
+                wx, wy = self._window_rect[:2]
+                x0, y0, x1, y1 = both
+                self._frame[y0:y1, x0:x1] += self._window_term[y0 - wy:y1 - wy, x0 - wx:x1 - wx]
+        if prepare_all:
+            self._prepared = self._webcam.prepare(self._frame)
+            return
+        x0, y0, x1, y1 = rect
+        codes, sigma = self._webcam.prepare(self._frame[y0:y1, x0:x1])
+        self._prepared[0][y0:y1, x0:x1] = codes
+        if sigma is not None:
+            self._prepared[1][y0:y1, x0:x1] = sigma
+
+    def _raster_box_world(self, r0, r1, c0, c1):
+        """Return the world extent (x_min, x_max, y_min, y_max) of raster rows/cols [m]."""
+        x_min, _, y_min, _ = self.extent
+        cell = self.pixel_size
+        return (x_min + c0 * cell, x_min + c1 * cell, y_min + r0 * cell, y_min + r1 * cell)
+
+    def _image_rect(self, T_world_camera, box):
+        """
+        Return (wide, inner) image rectangles (x0, y0, x1, y1) [px] of a ground box, or None.
+
+        `inner` holds every pixel that sees the box or its blur; `wide` adds the context the
+        blur needs. The whole image when a corner of the box is behind the camera.
+        """
+        x0, x1, y0, y1 = box
+        corners = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
+        in_camera = transform_points(invert_transform(T_world_camera), corners)
+        width, height = self.camera.width, self.camera.height
+        if np.any(in_camera[:, 2] <= 0.0) or np.any(self.camera.distortion):
+            pixels = None
+        else:
+            pixels = self.camera.project(in_camera)
+        margin = self._webcam.blur_margin() + 2
+        if pixels is None:
+            inner = (0, 0, width, height)
+        else:
+            low = np.floor(pixels.min(axis=0)).astype(int) - margin
+            high = np.ceil(pixels.max(axis=0)).astype(int) + margin + 1
+            inner = (max(int(low[0]), 0), max(int(low[1]), 0), min(int(high[0]), width),
+                     min(int(high[1]), height))
+            if inner[2] <= inner[0] or inner[3] <= inner[1]:
+                return None
+        wide = (max(inner[0] - margin, 0), max(inner[1] - margin, 0),
+                min(inner[2] + margin, width), min(inner[3] + margin, height))
+        return wide, inner
+
+
+def _intersection(a, b):
+    """Return the intersection of two rectangles (x0, y0, x1, y1), or None."""
+    if a is None or b is None:
+        return None
+    x0, y0, x1, y1 = max(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), min(a[3], b[3])
+    return (x0, y0, x1, y1) if x1 > x0 and y1 > y0 else None
+
+
+def _overlap(a, b):
+    """Tell whether two rectangles overlap."""
+    return _intersection(a, b) is not None
+
+
+def _merged(rects):
+    """Return one even-aligned rectangle covering all of `rects` (the Bayer phase), or none."""
+    if not rects:
+        return []
+    x0, y0 = min(r[0] for r in rects) // 2 * 2, min(r[1] for r in rects) // 2 * 2
+    return [(x0, y0, max(r[2] for r in rects), max(r[3] for r in rects))]
+
+
+def light_window(field, shape, origin, pixel_size, window):
+    """
+    Return (rows, cols, lit): the direct light in a window of the panel raster (rows from y_min).
+
+    `lit` is the direct sun's irradiance relative to the direct sun on the panel, per unit
+    DNI: 0 in the lens shadow, 1 outside it, plus the concentrated rays binned per pixel
+    (far above 1 in the focus). None if the window misses the panel. The sky's diffuse
+    light is the camera's to add (`RgbCamera.render`): a cloud dims the direct sun, not it.
+    """
+    c0 = max(0, int(math.floor((window[0] - origin[0]) / pixel_size)))
+    c1 = min(shape[1], int(math.ceil((window[1] - origin[0]) / pixel_size)))
+    r0 = max(0, int(math.floor((window[2] - origin[1]) / pixel_size)))
+    r1 = min(shape[0], int(math.ceil((window[3] - origin[1]) / pixel_size)))
+    if c1 <= c0 or r1 <= r0:
+        return None
+    xs = origin[0] + (np.arange(c0, c1) + 0.5) * pixel_size
+    ys = origin[1] + (np.arange(r0, r1) + 0.5) * pixel_size
+    shadow = field.in_shadow(xs[None, :], ys[:, None])
+    # the rays' power binned per raster pixel (bincount: np.histogram2d's searches cost
+    # ~10 ms for 120 000 rays, this ~1 ms)
+    column = np.floor((field.points[:, 0] - origin[0]) / pixel_size).astype(np.int64) - c0
+    row = np.floor((field.points[:, 1] - origin[1]) / pixel_size).astype(np.int64) - r0
+    inside = (column >= 0) & (column < c1 - c0) & (row >= 0) & (row < r1 - r0)
+    binned = np.bincount(row[inside] * (c1 - c0) + column[inside],
+                         weights=field.power[inside],
+                         minlength=(r1 - r0) * (c1 - c0)).reshape(r1 - r0, c1 - c0)
+    concentrated = binned / (pixel_size * pixel_size) / max(field.direct, 1e-6)
+    concentrated = cv2.GaussianBlur(concentrated.astype(np.float32), (0, 0), 0.7)
+    lit = np.where(shadow, 0.0, 1.0) + concentrated
+    return slice(r0, r1), slice(c0, c1), lit.astype(np.float32)
