@@ -28,6 +28,7 @@ import time
 
 import cv2
 from helio_optics.bench_report import add_json_option, median_call_ms, report
+from helio_optics.config_files import config_path
 from helio_perception.ground_plane import GroundMapping, MarkerDetector
 from helio_perception.spot_detection import SpotDetector, to_gray
 from helio_perception.synthetic_scene import SyntheticScene
@@ -102,14 +103,8 @@ def bench_thermal(repeats, figures):
 
 
 def dds_profile():
-    """Return the path of the package's Fast DDS profile for large images (or None)."""
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        path = os.path.join(get_package_share_directory('helio_perception'), 'config',
-                            'fastdds_large_images.xml')
-    except (ImportError, LookupError):
-        return None
-    return path if os.path.exists(path) else None
+    """Return the path of the workspace's Fast DDS profile for large images (or None)."""
+    return config_path('fastdds_large_images.xml', required=False)
 
 
 def bench_end_to_end(width, height, rate, seconds, figures, profile=True):
@@ -117,7 +112,7 @@ def bench_end_to_end(width, height, rate, seconds, figures, profile=True):
     import rclpy
     from helio_msgs.msg import SpotObservation
     from helio_optics.rig_kinematics import JOINT_NAMES
-    from helio_perception.image_conversion import numpy_to_image
+    from helio_optics.node_kit.conversions import numpy_to_image
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
@@ -180,6 +175,9 @@ def bench_end_to_end(width, height, rate, seconds, figures, profile=True):
             while True:
                 now = time.perf_counter()
                 if now >= next_joints:  # like the drivers: /joint_states on its own timer
+                    # stamped: the node looks the joints up at each image's stamp (an
+                    # unstamped state is never near it, and the pose cache never hits)
+                    state.header.stamp = node.get_clock().now().to_msg()
                     joints.publish(state)
                     next_joints += 1.0 / JOINT_STATE_RATE
                 if now >= due:
@@ -211,6 +209,7 @@ def bench_end_to_end(width, height, rate, seconds, figures, profile=True):
             raise RuntimeError('spot_detector did not start within 30 s')
         for _ in range(20):  # camera info and joints before the first image
             infos.publish(info)
+            state.header.stamp = node.get_clock().now().to_msg()
             joints.publish(state)
             executor.spin_once(timeout_sec=0.05)
         # warm up for a second at the same rate: the first (full) marker detection, the

@@ -16,12 +16,15 @@ interest around the last corners when they have, and falls back to the whole fra
 """
 
 from dataclasses import dataclass, field
+import math
 
 import cv2
 from helio_optics.geometry import (
-    homogeneous, invert_transform, PinholeCamera, transform_points, transform_vectors)
-from helio_perception.ground_render import aruco_dictionary
+    homogeneous, invert_transform, transform_points, transform_vectors)
+from helio_optics.ground_render import aruco_dictionary, srgb8_to_linear_table
 import numpy as np
+
+RESPONSES = ('srgb', 'linear')
 
 
 @dataclass
@@ -32,7 +35,8 @@ class MarkerPose:
     `T_world_camera` maps rgb optical-frame points into the world; `corners` (4, 2) are the
     detected marker corners in pixels (cv2.aruco order: top-left, top-right, bottom-right,
     bottom-left of the marker image); `stamp` [s] of the image it was detected in;
-    `reprojection_error` RMS [px].
+    `reprojection_error` RMS [px]; `edge_width` the 10-90 % rise of its widest outer edge
+    [px] (a sharp frame: about 2.6 optical blur sigmas; motion blur widens it).
     """
 
     T_world_camera: np.ndarray
@@ -40,6 +44,12 @@ class MarkerPose:
     stamp: float
     reprojection_error: float
     joints: np.ndarray = None
+    edge_width: float = math.nan     # widest outer edge's 10-90 % rise [px] (NaN: unknown)
+
+    @property
+    def blur(self):
+        """Return the edge width [px] (the frame's blur as the marker shows it)."""
+        return self.edge_width
 
 
 @dataclass
@@ -56,20 +66,6 @@ def marker_object_points(side):
     """Return the marker corners in the world frame (4, 3) in cv2.aruco's order [m]."""
     h = side / 2.0
     return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
-
-
-def camera_from_info(k, d, width, height):
-    """Make a PinholeCamera from CameraInfo's k (9 values), d and size; check them."""
-    matrix = np.asarray(k, dtype=float).reshape(3, 3)
-    if matrix[0, 0] <= 0 or matrix[1, 1] <= 0 or matrix[2, 2] != 1.0:
-        raise ValueError(f'camera matrix is not a valid intrinsic matrix: {matrix.tolist()}')
-    if width <= 0 or height <= 0:
-        raise ValueError(f'camera size {width}x{height} is empty')
-    distortion = np.zeros(5)
-    d = np.asarray(d, dtype=float).ravel()[:5]
-    distortion[:len(d)] = d
-    return PinholeCamera(matrix=matrix, width=int(width), height=int(height),
-                         distortion=distortion)
 
 
 class GroundMapping:
@@ -201,6 +197,9 @@ class MarkerConfig:
     refine_edges: bool = True        # corners from lines fitted to the marker's outer edges
     detect_max_width: int = 640      # wider images are downscaled for detection [px] (0: never)
     roi_side_pixels: int = 120       # ROI re-detection scales the marker to about this [px]
+    response: str = 'srgb'           # the camera's tone curve: 'srgb' (webcams) or 'linear'
+    max_edge_width: float = 4.5      # sharper frames: outer edges' 10-90 % rise up to this [px]
+    max_clipped_fraction: float = 0.5  # over-exposed: more of the outline's white at full scale
 
 
 class MarkerDetector:
@@ -220,6 +219,7 @@ class MarkerDetector:
         self._detector = cv2.aruco.ArucoDetector(
             aruco_dictionary(self.config.dictionary), parameters)
         self._object = marker_object_points(self.config.side)
+        self._to_linear = response_table(self.config.response)
 
     def detect(self, gray, camera, stamp=0.0, roi=None):
         """
@@ -233,16 +233,19 @@ class MarkerDetector:
             x0, y0, x1, y1 = roi
             image = gray[y0:y1, x0:x1]
             offset = np.array([x0, y0], dtype=float)
+        image = self._linear8(image)
         # Coarse to fine: the adaptive threshold (windows up to 23 px) loses a marker whose
         # black border is wider than its window and finds a decoy quad inside the border,
-        # so a larger scale is tried only when the smaller ones fail.
+        # so a larger scale is tried only when the smaller ones fail; a downscaled image
+        # that misses a small marker is followed by the image at full resolution.
         limit = self.config.detect_max_width if roi is None else 2 * self.config.roi_side_pixels
         first = min(1.0, limit / image.shape[1]) if limit > 0 else 1.0
+        scales = [first, first / 2, first / 4] + ([1.0] if first < 1.0 else [])
         wanted = self.config.marker_id
         seen, rejected_quads = set(), []
-        for scale in (first, first / 2, first / 4):
+        for scale in scales:
             if image.shape[1] * scale < 32 or image.shape[0] * scale < 32:
-                break
+                continue
             small = image if scale == 1.0 else cv2.resize(
                 image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
             corners, ids, rejected = self._detector.detectMarkers(small)
@@ -253,15 +256,24 @@ class MarkerDetector:
             ids = [] if ids is None else [int(i) for i in ids.ravel()]
             seen.update(ids)
             # the marker's own outline has a black inside and a white outside all round
-            found = [refine_corners_from_edges(gray, c.astype(float), camera)
+            found = [self.refine(gray, c.astype(float), camera, scale)
                      for c, i in zip(corners, ids) if i == wanted]
-            found = [(c, contrast) for c, contrast in found if contrast > 0]
+            found = [fit for fit in found if fit.contrast > 0]
             if found:
-                best, _ = max(found, key=lambda item: item[1])
+                fit = max(found, key=lambda item: item.contrast)
+                best = fit.corners
                 if not self.config.refine_edges:
                     best = min((c for c, i in zip(corners, ids) if i == wanted),
                                key=lambda c: np.abs(c - best).max()).astype(float)
-                return self.pose_from_corners(best, camera, stamp)
+                if fit.clipped_fraction > self.config.max_clipped_fraction:
+                    return MarkerResult(reason=(
+                        f'marker over-exposed: its white is at full scale along '
+                        f'{100 * fit.clipped_fraction:.0f} % of its outline (the pose would '
+                        'be biased: lower the exposure or gain)'))
+                result = self.pose_from_corners(best, camera, stamp)
+                if result.pose is not None:
+                    result.pose.edge_width = fit.edge_width
+                return result
         if any(_cut_marker_like(gray, c, self.config.min_side_pixels) for c in rejected_quads):
             return MarkerResult(reason=f'marker {wanted} partly visible (cut by the image '
                                 'border)')
@@ -271,6 +283,48 @@ class MarkerDetector:
         others = sorted(seen - {wanted})
         extra = f' (saw ids {others})' if others else ''
         return MarkerResult(reason=f'marker {wanted} not found{extra}')
+
+    def _linear8(self, image):
+        """
+        Return an 8-bit image of linear light, a dim one brightened (99th percentile at 128).
+
+        cv2.aruco's adaptive threshold then sees the black border as the light has it: the
+        sRGB curve brightens a thin, blurred black border (an oblique marker's far side)
+        until it breaks up; and a dim scene (a cloud: sky light only) still spans the
+        levels the threshold's constant needs.
+        """
+        image = np.ascontiguousarray(image)
+        bright = float(self._to_linear[percentile_level(
+            np.ascontiguousarray(image[::4, ::4]), None, 99.0)])
+        gain = min(max(0.5 / max(bright, 1e-3), 1.0), 16.0)   # dim scenes only
+        table = np.clip(np.rint(self._to_linear * (255.0 * gain)), 0, 255)
+        return cv2.LUT(image, table.astype(np.uint8))
+
+    def refine(self, gray, corners, camera, scale=1.0):
+        """
+        Refine detected corners on the full image: an EdgeFit.
+
+        Corners found on an image downscaled by `scale` can be a few full-resolution pixels
+        off, more than the fine refinement accepts: wide passes (as far as the downscaling
+        can err, an eighth of the shortest side at most) until the corners settle, then the
+        fine one. The reach across the edges grows
+        with the marker (8 % of its shortest side, 2-8 px).
+        """
+        side = float(np.min(np.linalg.norm(corners - np.roll(corners, 1, axis=0), axis=1)))
+        fine = float(np.clip(0.08 * side, 2.0, 8.0))   # within the border cell, 1/6 side
+        coarse = max(fine, min(max(4.0, 2.5 / scale), 0.125 * side))
+        for _ in range(3):   # wide passes until the corners settle (each re-centres the reach)
+            nearer = refine_corners_from_edges(
+                gray, corners, camera, samples=12, reach=coarse, step=0.5,
+                to_linear=self._to_linear, max_shift=2.0 * coarse)
+            if nearer.contrast <= 0:
+                break
+            moved = float(np.max(np.linalg.norm(nearer.corners - corners, axis=1)))
+            corners = nearer.corners
+            if moved < 0.5:
+                break
+        return refine_corners_from_edges(gray, corners, camera, reach=fine,
+                                         to_linear=self._to_linear)
 
     def pose_from_corners(self, pixels, camera, stamp=0.0):
         """Solve the camera pose from the 4 marker corners (IPPE square) and check it."""
@@ -317,55 +371,121 @@ class MarkerDetector:
         return MarkerResult(reason='marker pose implausible: ' + reason)
 
 
-def refine_corners_from_edges(gray, corners, camera, samples=24, reach=3.0, step=0.25):
+def response_table(response):
     """
-    Return (corners (4, 2) [px], edge contrast) from lines fitted to the marker's outer edges.
+    Return the (256,) float32 table of linear light [0-1] for the camera's 8-bit levels.
+
+    `response` 'srgb' (webcams: IEC 61966-2-1 tone curve) or 'linear' (level / 255).
+    """
+    if response == 'srgb':
+        return srgb8_to_linear_table()
+    if response == 'linear':
+        return (np.arange(256) / 255.0).astype(np.float32)
+    raise ValueError(f'camera response must be one of {RESPONSES}, got {response!r}')
+
+
+@dataclass
+class EdgeFit:
+    """
+    Marker corners from lines fitted to its outer edges (`refine_corners_from_edges`).
+
+    `corners` (4, 2) [px]; `contrast` the smallest edge's mean linear step from inside to
+    outside (0: the fit failed and `corners` are the input); `edge_width` the widest edge's
+    median 10-90 % rise [px]; `clipped_fraction` the share of edge profiles whose white side
+    is at the sensor's full scale (over-exposed) [-].
+    """
+
+    corners: np.ndarray
+    contrast: float = 0.0
+    edge_width: float = math.nan
+    clipped_fraction: float = 0.0
+
+
+def percentile_level(image, mask, percent):
+    """Return the 8-bit level at `percent` of an 8-bit image's (masked) pixels (0 if none)."""
+    counts = cv2.calcHist([image], [0], mask, [256], [0, 256]).ravel().cumsum()
+    if counts[-1] <= 0:
+        return 0
+    return int(np.searchsorted(counts, percent / 100.0 * counts[-1]))
+
+
+def refine_corners_from_edges(gray, corners, camera, samples=24, reach=3.0, step=0.25,
+                              to_linear=None, min_contrast=0.03, max_shift=2.0):
+    """
+    Return an EdgeFit: the marker's corners from lines fitted to its outer edges.
 
     cv2.cornerSubPix pulls the corners of a blurred dark square inward (about 0.17 px here,
     which tilts the pose); the straight outer edges are unbiased: along each edge, away from
     the corners, the half-level crossing of the dark-to-light profile across the edge is
     found to sub-pixel, the points are undistorted (lines stay lines), a line is fitted to
-    each edge and adjacent lines are intersected. The contrast is the mean grey step from the
-    inside to the outside (high for the real marker outline). Returns the input corners
-    (and contrast 0) if an edge is unusable.
+    each edge and adjacent lines are intersected.
+
+    The profiles are taken in LINEAR light (`to_linear`, a table of the camera's 8-bit
+    levels, e.g. `response_table('srgb')`; None: level / 255): a blurred edge crosses half
+    way between its dark and light sides where the edge is only in linear light; in sRGB
+    levels the crossing sits 0.8 blur sigma on the dark side (the marker looks smaller and
+    the camera farther away). `reach` [px] is how far across the given edge lines to look.
+
+    The contrast is high for the real marker outline; the edge width grows with motion blur
+    or defocus. Returns the input corners with contrast 0 if an edge is unusable or the
+    result is more than `max_shift` px from the input.
     """
     corners = np.asarray(corners, dtype=float)
+    table = response_table('linear') if to_linear is None else to_linear
     offsets = np.arange(-reach, reach + step / 2, step)
     starts, ends = corners, np.roll(corners, -1, axis=0)
     along = ends - starts
     lengths = np.linalg.norm(along, axis=1)
-    if lengths.min() < 8 * reach:
-        return corners, 0.0
+    if lengths.min() < 4 * reach + 8:
+        return EdgeFit(corners)
     normals = np.stack([along[:, 1], -along[:, 0]], axis=1) / lengths[:, None]
     outward = np.sum(normals * ((starts + ends) / 2 - corners.mean(axis=0)), axis=1) < 0
     normals[outward] *= -1.0  # outward: from the black border to the white quiet zone
     t = np.linspace(0.15, 0.85, samples)
     base = starts[:, None, :] + t[None, :, None] * along[:, None, :]          # (4, S, 2)
     grid = base[:, :, None, :] + offsets[None, None, :, None] * normals[:, None, None, :]
-    profiles = cv2.remap(gray, grid[..., 0].reshape(4 * samples, -1).astype(np.float32),
-                         grid[..., 1].reshape(4 * samples, -1).astype(np.float32),
+    # linearise only the part of the image the profiles read (then interpolate linear light)
+    height, width = gray.shape[:2]
+    low = np.floor(grid.reshape(-1, 2).min(axis=0)).astype(int) - 1
+    high = np.ceil(grid.reshape(-1, 2).max(axis=0)).astype(int) + 2
+    x0, y0 = max(int(low[0]), 0), max(int(low[1]), 0)
+    x1, y1 = min(int(high[0]), width), min(int(high[1]), height)
+    if x1 - x0 < 2 or y1 - y0 < 2:
+        return EdgeFit(corners)
+    patch = cv2.LUT(np.ascontiguousarray(gray[y0:y1, x0:x1]), table)
+    profiles = cv2.remap(patch, (grid[..., 0] - x0).reshape(4 * samples, -1).astype(np.float32),
+                         (grid[..., 1] - y0).reshape(4 * samples, -1).astype(np.float32),
                          cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(float)
     dark, light = profiles[:, :3].mean(axis=1), profiles[:, -3:].mean(axis=1)
+    rise = light - dark
     level = 0.5 * (dark + light)
     above = profiles >= level[:, None]
     first = np.argmax(above, axis=1)
     rows = np.arange(4 * samples)
-    usable = above[rows, first] & (first > 0) & (light - dark >= 20)
+    usable = above[rows, first] & (first > 0) & (rise >= min_contrast)
     first = np.maximum(first, 1)
     p0, p1 = profiles[rows, first - 1], profiles[rows, first]
     with np.errstate(divide='ignore', invalid='ignore'):
         crossing = offsets[first - 1] + step * (level - p0) / (p1 - p0)
+        # 10-90 % rise: the normalised profile integrates to the distance from the 90 % side
+        normalised = np.clip((profiles - dark[:, None]) / rise[:, None], 0.0, 1.0)
+    # an over-exposed white side is clipped at full scale: its true level, hence the half
+    # level, is unknown and the crossing moves towards the dark side (the marker looks
+    # larger); counted, and refused by the detector above `max_clipped_fraction`
+    clipped = profiles[:, -3:].mean(axis=1) >= 0.99 * float(table[-1])
     usable &= np.isfinite(crossing)
+    widths = _rise_widths(normalised, step)
     points = base.reshape(-1, 2) + crossing[:, None] * np.repeat(normals, samples, axis=0)
     usable = usable.reshape(4, samples)
-    contrasts = (light - dark).reshape(4, samples).mean(axis=1)
+    contrasts = rise.reshape(4, samples).mean(axis=1)
     if np.any(usable.sum(axis=1) < samples // 2):
-        return corners, 0.0
-    rays = camera.pixel_rays(points)
-    normalised = (rays[:, :2] / rays[:, 2:3]).reshape(4, samples, 2)
+        return EdgeFit(corners)
+    edge_widths = [float(np.median(widths.reshape(4, samples)[i][usable[i]])) for i in range(4)]
+    rays = camera.pixel_rays(np.where(np.isfinite(points), points, 0.0))  # unusable: unused
+    normalised_points = (rays[:, :2] / rays[:, 2:3]).reshape(4, samples, 2)
     lines = []
     for i in range(4):
-        edge = normalised[i][usable[i]]
+        edge = normalised_points[i][usable[i]]
         mean = edge.mean(axis=0)
         _, _, vt = np.linalg.svd(edge - mean)
         lines.append((mean, vt[0]))
@@ -375,14 +495,33 @@ def refine_corners_from_edges(gray, corners, camera, samples=24, reach=3.0, step
         # corner i joins edge i-1 (from corner i-1) and edge i (to corner i+1)
         matrix = np.column_stack([d, -e])
         if abs(np.linalg.det(matrix)) < 1e-9:
-            return corners, 0.0
+            return EdgeFit(corners)
         s, _ = np.linalg.solve(matrix, q - p)
         x, y = p + s * d
         refined.append((x, y, 1.0))
     refined = camera.project(np.array(refined))
-    if np.max(np.linalg.norm(refined - corners, axis=1)) > 2.0:
-        return corners, 0.0  # the fit disagrees with the detector: keep its corners
-    return refined, min(contrasts)
+    if np.max(np.linalg.norm(refined - corners, axis=1)) > max_shift:
+        return EdgeFit(corners)  # the fit disagrees with the detector: keep its corners
+    return EdgeFit(refined, float(min(contrasts)), float(max(edge_widths)),
+                   float(np.mean(clipped[usable.ravel()])))
+
+
+def _rise_widths(normalised, step):
+    """
+    Return the 10-90 % rise width [px] of each normalised edge profile (rows, 0 to 1).
+
+    The crossings are interpolated on each profile's running maximum (monotone).
+    """
+    envelope = np.maximum.accumulate(normalised, axis=1)
+    rows = np.arange(len(envelope))
+    crossings = []
+    for level in (0.1, 0.9):
+        index = np.clip(np.argmax(envelope >= level, axis=1), 1, envelope.shape[1] - 1)
+        before, after = envelope[rows, index - 1], envelope[rows, index]
+        with np.errstate(divide='ignore', invalid='ignore'):
+            fraction = np.clip((level - before) / (after - before), 0.0, 1.0)
+        crossings.append((index - 1 + np.nan_to_num(fraction)) * step)
+    return crossings[1] - crossings[0]
 
 
 def _cut_marker_like(gray, quad, min_side):
@@ -456,7 +595,9 @@ class MarkerPoseTracker:
                                      '(last seen at the image border)')
             return result
         self.counts[result.searched] += 1
-        result.pose.joints = joints if still else None  # None: not reusable
+        # None: not reusable (the joints moved since the last frame, or the frame is blurred)
+        sharp = not result.pose.edge_width > config.max_edge_width
+        result.pose.joints = joints if still and sharp else None
         self.last = result.pose
         return result
 

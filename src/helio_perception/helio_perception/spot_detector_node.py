@@ -1,12 +1,16 @@
 """
 Node spot_detector: the light spot on the ground plane from the RGB camera (paper Eqs 7-10).
 
-Subscribes (sensor-data QoS) ``/rgb/image_raw`` (rgb8, bgr8, rgba8, bgra8 or mono8) and
-``/rgb/camera_info``; (reliable) ``/joint_states`` for the marker-pose cache and the optics
-frame of the Eq 10 features. Publishes (reliable) ``/spot`` (helio_msgs/SpotObservation,
-one per processed image, valid or with its reason) and ``/diagnostics``
+Subscribes (sensor-data QoS) ``rgb/image_raw`` (rgb8, bgr8, rgba8, bgra8 or mono8) and
+``rgb/camera_info``; (reliable) ``joint_states`` (the drivers' partial messages, merged by
+``JointStateBuffer``; the joints at each image's stamp) for the marker-pose cache and the
+optics frame of the Eq 10 features. Publishes (reliable) ``spot``
+(helio_msgs/SpotObservation, one per processed image, valid or with its reason) and the
+global ``/diagnostics``
 (diagnostic_msgs/DiagnosticArray: frames received, published, malformed, invalid by reason,
-dropped (estimated from stamp gaps), marker searches, processing time).
+dropped (estimated from stamp gaps), marker searches, processing time; ERROR when no image
+arrived for `input_timeout` on the node clock or `input_wall_timeout` of wall time, WARN for
+malformed frames or no camera info), published on wall time.
 
 The logic is `helio_perception.spot_observer.SpotObserver`; this file declares the
 parameters (config/spot_detector.yaml), converts messages and calls it. A malformed frame is
@@ -20,18 +24,21 @@ import cv2
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Point
 from helio_msgs.msg import SpotObservation
-from helio_optics.geometry import quaternion_from_matrix
-from helio_optics.lens import LensParameters
-from helio_optics.node_parameters import declare
-from helio_optics.node_runner import run_node
-from helio_perception.frame_statistics import FrameStatistics
-from helio_perception.ground_plane import camera_from_info, MarkerConfig
-from helio_perception.image_conversion import image_to_numpy, ImageConversionError
-from helio_perception.node_support import (
-    diagnostics, JointCache, load_rig, stamp_seconds)
-from helio_perception.process_tuning import frozen_after_start_up, keep_large_buffers
+from helio_optics.geometry import invert_transform, quaternion_from_matrix
+from helio_optics.node_kit.conversions import camera_from_info, image_to_numpy
+from helio_optics.node_kit.conversions import ImageConversionError, stamp_to_seconds
+from helio_optics.node_kit.deployment import declare_lens, declare_rig
+from helio_optics.node_kit.deployment import follow_world_calibration
+from helio_optics.node_kit.diagnostics import diagnostic_array, OK
+from helio_optics.node_kit.joint_states import JointStateBuffer
+from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.process_tuning import frozen_after_start_up, keep_large_buffers
+from helio_optics.node_kit.runner import run_node
+from helio_perception.frame_statistics import FrameStatistics, InputFreshness
+from helio_perception.ground_plane import MarkerConfig, RESPONSES
 from helio_perception.spot_detection import SpotConfig, THRESHOLD_MODES
 from helio_perception.spot_observer import optics_from_world, SpotObserver
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -44,6 +51,9 @@ class SpotDetectorNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('spot_detector', **kwargs)
+        response = declare(self, 'camera_response', 'srgb',
+                           "The camera's tone curve, undone before edges and spots are "
+                           "measured: 'srgb' (webcams) or 'linear'.", choices=RESPONSES)
         marker = MarkerConfig(
             dictionary=declare(self, 'marker.dictionary', 'DICT_4X4_50',
                                'cv2.aruco predefined dictionary of the ground marker.'),
@@ -72,16 +82,32 @@ class SpotDetectorNode(Node):
             refine_edges=declare(self, 'marker.refine_edges', True,
                                  'Take the corners from lines fitted to the outer edges.'),
             detect_max_width=declare(self, 'marker.detect_max_width', 640,
-                                     'Wider images are downscaled for detection (0: never) '
-                                     '[px].', 0, 8192))
+                                     'Wider images are downscaled for detection, then '
+                                     'searched at full size if that fails (0: never) [px].',
+                                     0, 8192),
+            max_edge_width=declare(self, 'marker.max_edge_width_pixels', 4.5,
+                                   "Sharpest acceptable frames: the marker's outer edges "
+                                   'rise (10-90 %) within this; wider is BLURRED [px].',
+                                   1.0, 100.0),
+            max_clipped_fraction=declare(self, 'marker.max_clipped_fraction', 0.5,
+                                         "Refuse the marker when more of its outline's white "
+                                         'is at full scale (over-exposed) [-].', 0.0, 1.0),
+            response=response)
         spot = SpotConfig(
-            threshold_mode=declare(self, 'spot.threshold_mode', 'fixed',
-                                   'Binary threshold for the candidates.',
+            threshold_mode=declare(self, 'spot.threshold_mode', 'auto',
+                                   "Binary threshold for the candidates: 'auto' follows the "
+                                   "frame's light, 'fixed' or 'otsu'.",
                                    choices=THRESHOLD_MODES),
             threshold=declare(self, 'spot.threshold', 220.0,
-                              "Grey level of the 'fixed' threshold [0-255].", 0.0, 255.0),
+                              "Grey level of the 'fixed' threshold, ceiling of 'auto' "
+                              '[0-255].', 0.0, 255.0),
+            relative_threshold=declare(self, 'spot.relative_threshold', 1.5,
+                                       "'auto': candidates brighter than this many times the "
+                                       "frame's bright diffuse light (95th percentile, "
+                                       'linear) [-].', 1.0, 100.0),
             min_threshold=declare(self, 'spot.min_threshold', 100.0,
-                                  'Floor of the Otsu threshold [0-255].', 0.0, 255.0),
+                                  "Floor of the 'auto' and Otsu thresholds [0-255].",
+                                  0.0, 255.0),
             blur_kernel=declare(self, 'spot.blur_kernel', 5,
                                 'Gaussian blur before thresholding (odd; <= 1: none) [px].',
                                 0, 31),
@@ -99,12 +125,19 @@ class SpotDetectorNode(Node):
             marker_margin=declare(self, 'spot.marker_margin', 0.008,
                                   'Masked border around the marker (quiet zone) [m].',
                                   0.0, 1.0),
+            sheet_level=declare(self, 'spot.sheet_level', 0.6,
+                                "The marker's paper, masked: the region connected to its "
+                                'quiet zone brighter than this x its light (0: off) [-].',
+                                0.0, 1.0),
             max_jump=declare(self, 'spot.max_jump', 0.02,
                              'Largest move from the last spot to count as the same spot [m].',
                              0.0, 1.0),
             expected_max_age=declare(self, 'spot.expected_max_age', 2.0,
                                      'How long the last spot predicts the next [s].',
                                      0.0, 3600.0),
+            dominance=declare(self, 'spot.dominance', 4.0,
+                              'A candidate with this many times the light of each other one '
+                              'is the spot (0: off) [-].', 0.0, 1000.0),
             saturation_level=declare(self, 'spot.saturation_level', 250.0,
                                      'Grey level counted as saturated [0-255].', 0.0, 255.0),
             refine_margin=declare(self, 'spot.refine_margin', 4,
@@ -112,36 +145,43 @@ class SpotDetectorNode(Node):
                                   1, 100),
             edge_band=declare(self, 'spot.edge_band', 2,
                               'Band around the contour measured fractionally (0: off) [px].',
-                              0, 20))
+                              0, 20),
+            border_margin=declare(self, 'spot.border_margin_pixels', 2,
+                                  'A spot whose light comes this close to the image border is '
+                                  'CUT_BY_BORDER [px].', 0, 100),
+            occlusion_level=declare(self, 'spot.occlusion_level', 0.5,
+                                    "Neighbours of the spot's outline darker than this x its "
+                                    'background occlude it [-].', 0.0, 1.0),
+            max_occluded_fraction=declare(self, 'spot.max_occluded_fraction', 0.1,
+                                          'OCCLUDED when more of the outline borders them [-].',
+                                          0.0, 1.0),
+            response=response)
         self.observer = SpotObserver(marker, spot)
         self.features_in_optics = declare(
             self, 'features_in_optics_frame', True,
             'Compute the Eq 10 features in the optics frame from /joint_states and the rig '
             'kinematics (else, or without joint states, in the world frame).')
-        self.joint_state_timeout = declare(
-            self, 'joint_state_timeout', 1.0,
-            'Joint states older than this are not used (0: any age) [s].', 0.0, 3600.0)
-        rig_file = declare(self, 'rig_file', '',
-                           "Rig geometry YAML (empty: helio_optics' config/rig.yaml).")
-        lens = LensParameters(
-            focal_length=declare(self, 'lens.focal_length', LensParameters.focal_length,
-                                 'Lens focal length f [m] (optics frame, Eq 1).', 0.01, 1.0),
-            refractive_index=declare(self, 'lens.refractive_index',
-                                     LensParameters.refractive_index,
-                                     'Lens refractive index [-].', 1.01, 3.0),
-            thickness=declare(self, 'lens.thickness', LensParameters.thickness,
-                              'Lens plate thickness [m].', 0.0, 0.05),
-            aperture_diameter=declare(self, 'lens.aperture_diameter',
-                                      LensParameters.aperture_diameter,
-                                      'Lens clear aperture [m].', 0.001, 1.0))
+        self.joint_state_tolerance = declare(
+            self, 'joint_state_tolerance', 0.3,
+            'Largest time between an image and the joint states used for it [s].',
+            0.0, 10.0)
+        lens, _ = declare_lens(self)
         self.T_lens_optics = lens.T_lens_optics
-        self.rig = load_rig(self, rig_file) if self.features_in_optics else None
+        self.rig, _ = declare_rig(self)
+        self.kinematic_fallback = declare(
+            self, 'kinematic_pose_fallback', True,
+            'When the marker is not in view, map the spot through the camera pose of the '
+            "joints' forward kinematics, once a robot-world calibration has arrived on "
+            'calibration/world_pose (camera_pose_source says which pose was used).')
+        self.world_calibrated = False
+        follow_world_calibration(self, self.rig, self._calibrated)   # T_robot_world
         self.diagnostics_period = declare(self, 'diagnostics_period', 1.0,
-                                          'Period of /diagnostics and the log summary [s].',
-                                          0.0, 3600.0)
+                                          'Period of /diagnostics and the log summary, on '
+                                          'wall time [s].', 0.0, 3600.0)
+        self.freshness = InputFreshness.declared(self, 'rgb/image_raw', time.monotonic())
 
         self.stats = FrameStatistics()
-        self.joints = JointCache()
+        self.joints = JointStateBuffer()
         self.camera = None
         self._info_key = None
         self.spot_pub = self.create_publisher(SpotObservation, 'spot',
@@ -151,13 +191,24 @@ class SpotDetectorNode(Node):
         self.create_subscription(Image, 'rgb/image_raw', self.on_image, qos_profile_sensor_data)
         self.create_subscription(CameraInfo, 'rgb/camera_info', self.on_camera_info,
                                  qos_profile_sensor_data)
-        self.create_subscription(JointState, 'joint_states', self.joints.update, 50)
+        self.create_subscription(JointState, 'joint_states', self.on_joint_state, 50)
         if self.diagnostics_period > 0:
-            self.create_timer(self.diagnostics_period, self.publish_diagnostics)
+            # wall time: the node clock stops with /clock, and that must be reported too
+            self.create_timer(self.diagnostics_period, self.publish_diagnostics,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
             f'spot_detector: marker {marker.dictionary} id {marker.marker_id} side '
             f'{marker.side} m, threshold {spot.threshold_mode}, features in '
             f"{'optics (from /joint_states)' if self.features_in_optics else 'world'} frame")
+
+    def _calibrated(self, _rig):
+        self.world_calibrated = True
+
+    def on_joint_state(self, msg):
+        """Merge a (partial) joint state into the buffer."""
+        problem = self.joints.add_message(msg)
+        if problem:
+            self.get_logger().warn(problem, throttle_duration_sec=5.0)
 
     def on_camera_info(self, msg):
         """Keep the intrinsics; a change of intrinsics drops the cached marker pose."""
@@ -165,7 +216,7 @@ class SpotDetectorNode(Node):
         if key == self._info_key:
             return
         try:
-            camera = camera_from_info(msg.k, msg.d, msg.width, msg.height)
+            camera = camera_from_info(msg)
         except ValueError as error:
             self.stats.bad_frame('bad camera_info')
             self.get_logger().warn(f'ignoring /rgb/camera_info: {error}',
@@ -180,7 +231,8 @@ class SpotDetectorNode(Node):
     def on_image(self, msg):
         """Process one image: observe the spot and publish the observation."""
         started = time.perf_counter()
-        stamp = stamp_seconds(msg.header.stamp)
+        self.freshness.seen(self.node_seconds(), time.monotonic())
+        stamp = stamp_to_seconds(msg.header.stamp)
         dropped = self.stats.frame(stamp)
         if dropped:
             self.get_logger().debug(f'{dropped} frame(s) dropped before this one')
@@ -195,14 +247,19 @@ class SpotDetectorNode(Node):
             if order is None:
                 raise ImageConversionError(f'{msg.encoding} is not a colour or 8-bit mono '
                                            'encoding')
-            joints = self.joints.positions(self.joint_state_timeout)
-            T_optics_world = None
-            if self.rig is not None and joints is not None:
+            joints = self.joints.at(stamp, self.joint_state_tolerance).positions
+            T_optics_world = T_world_camera_kinematic = None
+            if joints is not None:
                 pose = self.rig.forward(joints)
-                T_optics_world = optics_from_world(pose.T_robot_lens, self.T_lens_optics,
-                                                   self.rig.parameters.T_robot_world)
+                if self.features_in_optics:
+                    T_optics_world = optics_from_world(pose.T_robot_lens, self.T_lens_optics,
+                                                       self.rig.parameters.T_robot_world)
+                if self.kinematic_fallback and self.world_calibrated:
+                    T_world_camera_kinematic = invert_transform(
+                        self.rig.parameters.T_robot_world) @ pose.T_robot_rgb
             observation = self.observer.observe(image, self.camera, stamp, joints,
-                                                T_optics_world, order)
+                                                T_optics_world, order,
+                                                T_world_camera_kinematic)
         except (ImageConversionError, ValueError, cv2.error) as error:
             self.stats.bad_frame(str(error))
             self.get_logger().warn(f'image skipped: {error}', throttle_duration_sec=2.0)
@@ -212,17 +269,34 @@ class SpotDetectorNode(Node):
         self.stats.result(True, observation.valid, observation.reason,
                           (time.perf_counter() - started) * 1e3)
 
+    def node_seconds(self):
+        """Return the node clock's time [s] (simulated time under use_sim_time)."""
+        return self.get_clock().now().nanoseconds * 1e-9
+
     def publish_diagnostics(self):
-        """Publish the frame counters on /diagnostics and log them."""
+        """Publish the frame counters and the input's health on /diagnostics; log them."""
+        node_now, wall_now = self.node_seconds(), time.monotonic()
         values = self.stats.as_dict()
         values.update({f'marker_{k}': v for k, v in self.observer.tracker.counts.items()})
-        self.diagnostics_pub.publish(diagnostics(self, 'spot_detector: frames', values,
-                                                 self.get_clock().now().to_msg()))
+        node_age, wall_age = self.freshness.ages(node_now, wall_now)
+        values['input_age_node_clock'], values['input_age_wall'] = node_age, wall_age
+        level, message = self.stats.health(
+            self.freshness.stale(node_now, wall_now),
+            '' if self.camera is not None else 'no rgb/camera_info yet')
+        self.diagnostics_pub.publish(diagnostic_array(
+            self.get_name(), 'spot_detector: frames', values, self.get_clock().now().to_msg(),
+            level, message))
+        if level != OK:
+            self.get_logger().warn(message, throttle_duration_sec=10.0)
         self.get_logger().debug(self.stats.summary())
 
 
 def to_message(observation, stamp):
-    """Build a SpotObservation from an Observation (world frame, features' own frame)."""
+    """
+    Build a SpotObservation from an Observation (world frame, features' own frame).
+
+    A measured spot's fields are filled whatever its quality (only a FULL one is valid).
+    """
     msg = SpotObservation()
     msg.header.stamp = stamp
     msg.header.frame_id = 'world'
@@ -230,6 +304,7 @@ def to_message(observation, stamp):
     msg.reason = observation.reason
     spot = observation.spot
     msg.marker_pose_age = float(observation.marker_pose_age)
+    msg.camera_pose_source = observation.pose_source
     if observation.T_world_camera is not None:
         position, rotation = observation.T_world_camera[:3, 3], observation.T_world_camera[:3, :3]
         msg.camera_pose.position = Point(x=float(position[0]), y=float(position[1]),
@@ -237,7 +312,9 @@ def to_message(observation, stamp):
         q = quaternion_from_matrix(rotation)
         msg.camera_pose.orientation.x, msg.camera_pose.orientation.y = float(q[0]), float(q[1])
         msg.camera_pose.orientation.z, msg.camera_pose.orientation.w = float(q[2]), float(q[3])
-    if not observation.valid:
+    msg.quality = int(observation.quality)
+    msg.quality_reason = observation.quality_reason
+    if not spot.measured:
         msg.feature_frame = ''
         msg.pi_feature = msg.theta_feature = msg.axis_angle = math.nan
         return msg

@@ -13,7 +13,8 @@ from helio_optics.geometry import invert_transform
 from helio_perception.ground_plane import (
     GroundMapping, MarkerConfig, MarkerDetector, MarkerPoseTracker)
 from helio_perception.spot_detection import (
-    position_features, SpotConfig, SpotDetector, SpotFeatures, SpotResult, to_gray)
+    position_features, QUALITY_BLURRED, QUALITY_NONE, SpotConfig, SpotDetector, SpotFeatures,
+    SpotResult, to_gray)
 import numpy as np
 
 
@@ -25,9 +26,13 @@ class Observation:
     reason: str
     spot: SpotResult
     features: SpotFeatures = None
+    quality: int = QUALITY_NONE
+    quality_reason: str = ''
+    edge_width: float = float('nan')   # the marker's outer edges, 10-90 % rise [px]
     T_world_camera: np.ndarray = None
     marker_pose_age: float = float('nan')
     marker_search: str = ''
+    pose_source: str = ''                  # 'marker', 'kinematics' or '' (no pose)
     stats: dict = field(default_factory=dict)
 
 
@@ -53,12 +58,14 @@ class SpotObserver:
         self._mapping = self._mapping_key = None
 
     def observe(self, image, camera, stamp, joints=None, T_optics_world=None,
-                channel_order='rgb'):
+                channel_order='rgb', T_world_camera_kinematic=None):
         """
         Return the Observation of one image (uint8 mono, rgb/bgr or rgba/bgra).
 
         `stamp` [s] of the image; `joints` the joint positions when it was taken (None if
         unknown: the marker is then searched near its last corners every frame).
+        `T_world_camera_kinematic`, when given, is the camera pose from the joints' forward
+        kinematics and the robot-world calibration: used when the marker is not in view.
         """
         gray = to_gray(image, channel_order)
         if gray.shape != (camera.height, camera.width):
@@ -66,19 +73,42 @@ class SpotObserver:
                              f'says {camera.width}x{camera.height}')
         marker = self.tracker.update(gray, camera, stamp, joints)
         if marker.pose is None:
-            return Observation(valid=False, reason=marker.reason, spot=SpotResult(),
-                               marker_search=marker.searched)
+            if T_world_camera_kinematic is None:
+                return Observation(valid=False, reason=marker.reason, spot=SpotResult(),
+                                   marker_search=marker.searched)
+            return self._observe_with(gray, camera, stamp, T_world_camera_kinematic,
+                                      T_optics_world, marker.searched)
         pose = marker.pose
         key = (id(pose), id(camera))
         if key != self._mapping_key:
             self._mapping = GroundMapping(camera, pose.T_world_camera)
             self._mapping_key = key
         spot = self.detector.detect(gray, self._mapping, self.marker_config.side, stamp)
+        if spot.measured and pose.edge_width > self.marker_config.max_edge_width:
+            spot.degrade(QUALITY_BLURRED, f"the marker's edges rise over "
+                         f'{pose.edge_width:.1f} px (> {self.marker_config.max_edge_width:g}'
+                         ' px: motion blur or defocus)')
         observation = Observation(valid=spot.valid, reason=spot.reason, spot=spot,
                                   T_world_camera=pose.T_world_camera,
                                   marker_pose_age=max(0.0, stamp - pose.stamp),
-                                  marker_search=marker.searched)
-        if spot.valid:
+                                  marker_search=marker.searched, quality=spot.quality,
+                                  quality_reason=spot.quality_reason,
+                                  edge_width=pose.edge_width, pose_source='marker')
+        if spot.measured:
+            frame = 'optics' if T_optics_world is not None else 'world'
+            observation.features = position_features(spot, T_optics_world, frame)
+        return observation
+
+    def _observe_with(self, gray, camera, stamp, T_world_camera, T_optics_world, searched):
+        """Detect the spot through a camera pose given from outside (no marker in view)."""
+        spot = self.detector.detect(gray, GroundMapping(camera, T_world_camera),
+                                    self.marker_config.side, stamp)
+        observation = Observation(valid=spot.valid, reason=spot.reason, spot=spot,
+                                  T_world_camera=np.asarray(T_world_camera, dtype=float),
+                                  marker_search=searched, quality=spot.quality,
+                                  quality_reason=spot.quality_reason,
+                                  pose_source='kinematics')
+        if spot.measured:
             frame = 'optics' if T_optics_world is not None else 'world'
             observation.features = position_features(spot, T_optics_world, frame)
         return observation

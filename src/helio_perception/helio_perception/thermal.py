@@ -10,11 +10,18 @@ Encodings (after `image_conversion.image_to_numpy`):
 
 - ``16UC1``: FLIR Lepton radiometric (TLinear) centikelvin, degC = raw / 100 - 273.15;
 - ``mono16``: a linear calibration degC = gain * raw + offset (parameters, gain > 0);
-- ``32FC1``: degC directly (NaN pixels are ignored).
+- ``32FC1``: degC directly.
+
+Pixels that cannot be readings are ignored and counted: NaN and +-inf in 32FC1, and any
+reading more than `cap_margin` above the camera's read-out cap (a camera that caps at
+180.9 degC cannot read 382 degC: a stuck or dead pixel, e.g. 65535 cK). Arrays of either
+byte order are read by value.
 
 Integer images are never converted as a whole: T_p becomes the smallest raw count whose
 temperature reaches it (evaluated with the same formula as the per-pixel conversion, so the
 count is exactly a direct count on converted pixels) and T_max comes from the raw maximum.
+A reading counts as at T_p when it is within `THRESHOLD_ROUNDING` below it: a decimal T_p
+and a decimal reading (238.9 degC = 51205 cK) differ by float rounding only.
 """
 
 from dataclasses import dataclass
@@ -26,6 +33,7 @@ import numpy as np
 CENTIKELVIN_GAIN = 0.01
 KELVIN_OFFSET = -273.15
 ENCODINGS = ('16UC1', 'mono16', '32FC1')
+THRESHOLD_ROUNDING = 1e-4   # [K]: far below any thermal camera's resolution (10 mK)
 
 
 @dataclass
@@ -37,6 +45,7 @@ class ThermalConfig:
     saturation_tolerance: float = 0.05  # T_max within this of the cap is saturated [K]
     mono16_gain: float = 0.01           # mono16 calibration: degC per count
     mono16_offset: float = -273.15      # mono16 calibration: degC at count 0
+    cap_margin: float = 1.0             # readings more than this above the cap are not [K]
 
 
 @dataclass
@@ -50,6 +59,7 @@ class ThermalStatistics:
     saturated: bool
     threshold: float    # [degC]
     camera_cap: float   # [degC]
+    ignored: int = 0    # pixels that are no reading (non-finite, above the cap) [-]
 
 
 def linear_calibration(encoding, config):
@@ -82,11 +92,13 @@ def raw_threshold(threshold, encoding, config):
     Return the smallest raw count whose temperature is >= threshold (gain > 0).
 
     Evaluated with `raw_to_celsius` itself, so a raw comparison equals a comparison of
-    converted pixels, edge values included.
+    converted pixels, edge values included; a count within THRESHOLD_ROUNDING below the
+    threshold reaches it.
     """
     gain, offset = linear_calibration(encoding, config)
     if not gain > 0:
         raise ValueError(f'the {encoding} calibration gain must be > 0, got {gain}')
+    threshold = threshold - THRESHOLD_ROUNDING
     raw = math.ceil((threshold - offset) / gain)
     while raw > 0 and raw_to_celsius(raw - 1, encoding, config) >= threshold:
         raw -= 1
@@ -96,7 +108,7 @@ def raw_threshold(threshold, encoding, config):
 
 
 class ThermalAnalyzer:
-    """Compute ThermalStatistics; caches the raw threshold per encoding."""
+    """Compute ThermalStatistics; caches the raw thresholds per encoding."""
 
     def __init__(self, config=None):
         self.config = config or ThermalConfig()
@@ -111,23 +123,40 @@ class ThermalAnalyzer:
         array = np.asarray(array)
         if array.ndim != 2 or array.size == 0:
             raise ValueError(f'a thermal image must be (H, W), got shape {array.shape}')
+        implausible = config.camera_cap + config.cap_margin
         if encoding == '32FC1':
-            valid = array == array  # NaN marks invalid pixels
-            if not valid.all():
-                if not valid.any():
-                    raise ValueError('the 32FC1 thermal image has no valid pixel (all NaN)')
+            if array.dtype.kind != 'f':
+                raise ValueError(f'32FC1 needs a float array, got {array.dtype.name}')
+            array = array.astype(np.float32, copy=False)   # native order, 32 bit
+            valid = np.isfinite(array) & (array <= np.float32(implausible))
+            ignored = int(array.size - np.count_nonzero(valid))
+            if ignored:
                 array = np.where(valid, array, -np.inf).astype(np.float32)
-            _, top, _, (u, v) = cv2.minMaxLoc(array)
-            t_max = float(top)
-            n_p = int(np.count_nonzero(array >= np.float32(config.threshold)))
+            level = np.float32(config.threshold - THRESHOLD_ROUNDING)
+            n_p = int(np.count_nonzero(array >= level))
         else:
+            if array.dtype.kind not in 'ui' or array.dtype.itemsize != 2:
+                raise ValueError(f'{encoding} needs a 16-bit integer array, got '
+                                 f'{array.dtype.name}')
+            array = array.astype(np.uint16, copy=False)   # native byte order, by value
             if encoding not in self._raw_thresholds:
-                self._raw_thresholds[encoding] = raw_threshold(config.threshold, encoding,
-                                                               config)
-            _, top, _, (u, v) = cv2.minMaxLoc(array)
-            t_max = float(raw_to_celsius(top, encoding, config))
-            n_p = int(np.count_nonzero(array >= self._raw_thresholds[encoding]))
+                self._raw_thresholds[encoding] = (
+                    raw_threshold(config.threshold, encoding, config),
+                    raw_threshold(implausible, encoding, config) + 1)
+            at_threshold, too_hot = self._raw_thresholds[encoding]
+            above = array >= too_hot
+            ignored = int(np.count_nonzero(above))
+            if ignored:
+                array = np.where(above, 0, array).astype(np.uint16)
+            n_p = int(np.count_nonzero(array >= at_threshold))
+        if ignored == array.size:
+            raise ValueError(f'the {encoding} thermal image has no plausible pixel (all '
+                             f'non-finite or above {implausible:g} degC)')
+        _, top, _, (u, v) = cv2.minMaxLoc(array)
+        if encoding != '32FC1':
+            top = raw_to_celsius(top, encoding, config)
+        t_max = float(top)
         return ThermalStatistics(
             t_max=t_max, n_p=n_p, hottest_u=int(u), hottest_v=int(v),
             saturated=bool(t_max >= config.camera_cap - config.saturation_tolerance),
-            threshold=config.threshold, camera_cap=config.camera_cap)
+            threshold=config.threshold, camera_cap=config.camera_cap, ignored=ignored)

@@ -1,12 +1,15 @@
 """
 Node thermal_monitor: pyrolysis statistics of each thermal image (paper Sec. IV-B, Fig. 8).
 
-Subscribes (sensor-data QoS) ``/thermal/image_raw`` (16UC1 centikelvin as a radiometric
+Subscribes (sensor-data QoS) ``thermal/image_raw`` (16UC1 centikelvin as a radiometric
 FLIR Lepton sends it, 32FC1 degC, or mono16 with a linear calibration) and
-``/thermal/camera_info``; (reliable) ``/joint_states``. Publishes (reliable)
-``/thermal/stats`` (helio_msgs/ThermalStats: T_max, N_p at or above T_p, the hottest pixel
-and, when the thermal camera's pose is known from the joints and the rig kinematics, the
-ground point it sees; saturated when T_max is at the camera cap) and ``/diagnostics``.
+``thermal/camera_info``; (reliable) ``joint_states`` (partial messages merged by
+``JointStateBuffer``). Publishes (reliable) ``thermal/stats`` (helio_msgs/ThermalStats:
+T_max, N_p at or above T_p, the hottest pixel and, when the thermal camera's pose is known
+from the joints and the rig kinematics, the ground point it sees; saturated when T_max is at
+the camera cap) and the global ``/diagnostics`` (on wall time; ERROR when no image arrived
+for ``input_timeout`` on the node clock or ``input_wall_timeout`` of wall time, WARN for
+malformed frames or pixels that are no reading).
 
 The statistics are `helio_perception.thermal.ThermalAnalyzer`; parameters in
 config/thermal_monitor.yaml. A malformed frame is logged with its reason and skipped.
@@ -18,16 +21,19 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Point
 from helio_msgs.msg import ThermalStats
 from helio_optics.geometry import invert_transform
-from helio_optics.node_parameters import declare
-from helio_optics.node_runner import run_node
-from helio_perception.frame_statistics import FrameStatistics
-from helio_perception.ground_plane import camera_from_info, GroundMapping
-from helio_perception.image_conversion import image_to_numpy, ImageConversionError
-from helio_perception.node_support import (
-    diagnostics, JointCache, load_rig, stamp_seconds)
-from helio_perception.process_tuning import frozen_after_start_up
+from helio_optics.node_kit.conversions import camera_from_info, image_to_numpy
+from helio_optics.node_kit.conversions import ImageConversionError, stamp_to_seconds
+from helio_optics.node_kit.deployment import declare_rig, follow_world_calibration
+from helio_optics.node_kit.diagnostics import diagnostic_array, ERROR
+from helio_optics.node_kit.joint_states import JointStateBuffer
+from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.process_tuning import frozen_after_start_up
+from helio_optics.node_kit.runner import run_node
+from helio_perception.frame_statistics import FrameStatistics, InputFreshness
+from helio_perception.ground_plane import GroundMapping
 from helio_perception.thermal import ThermalAnalyzer, ThermalConfig
 import numpy as np
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -50,24 +56,30 @@ class ThermalMonitorNode(Node):
             mono16_gain=declare(self, 'mono16.gain', 0.01,
                                 'mono16 calibration: degC per count.', 1e-9, 100.0),
             mono16_offset=declare(self, 'mono16.offset', -273.15,
-                                  'mono16 calibration: degC at count 0.', -1000.0, 1000.0))
+                                  'mono16 calibration: degC at count 0.', -1000.0, 1000.0),
+            cap_margin=declare(self, 'cap_margin', 1.0,
+                               'Readings more than this above camera_cap are no readings '
+                               '(stuck or dead pixels) and are ignored [K].', 0.0, 1000.0))
         self.analyzer = ThermalAnalyzer(config)
         self.locate_hottest = declare(
             self, 'locate_hottest_point', True,
             'Map the hottest pixel to the ground (needs /thermal/camera_info, /joint_states '
             'and the rig kinematics).')
-        self.joint_state_timeout = declare(
-            self, 'joint_state_timeout', 1.0,
-            'Joint states older than this are not used (0: any age) [s].', 0.0, 3600.0)
-        rig_file = declare(self, 'rig_file', '',
-                           "Rig geometry YAML (empty: helio_optics' config/rig.yaml).")
-        self.rig = load_rig(self, rig_file) if self.locate_hottest else None
+        self.joint_state_tolerance = declare(
+            self, 'joint_state_tolerance', 0.3,
+            'Largest time between an image and the joint states used for it [s].',
+            0.0, 10.0)
+        self.rig, _ = declare_rig(self)
+        follow_world_calibration(self, self.rig)     # T_robot_world from the marker
         self.frame_id = declare(self, 'frame_id', 'thermal',
                                 'frame_id of /thermal/stats (the thermal optical frame).')
         self.diagnostics_period = declare(self, 'diagnostics_period', 1.0,
-                                          'Period of /diagnostics [s].', 0.0, 3600.0)
+                                          'Period of /diagnostics, on wall time [s].',
+                                          0.0, 3600.0)
+        self.freshness = InputFreshness.declared(self, 'thermal/image_raw', time.monotonic())
+        self.ignored_pixels = 0
         self.stats = FrameStatistics()
-        self.joints = JointCache()
+        self.joints = JointStateBuffer()
         self.camera = None
         self.stats_pub = self.create_publisher(
             ThermalStats, 'thermal/stats',
@@ -77,16 +89,24 @@ class ThermalMonitorNode(Node):
                                  qos_profile_sensor_data)
         self.create_subscription(CameraInfo, 'thermal/camera_info', self.on_camera_info,
                                  qos_profile_sensor_data)
-        self.create_subscription(JointState, 'joint_states', self.joints.update, 50)
+        self.create_subscription(JointState, 'joint_states', self.on_joint_state, 50)
         if self.diagnostics_period > 0:
-            self.create_timer(self.diagnostics_period, self.publish_diagnostics)
+            # wall time: the node clock stops with /clock, and that must be reported too
+            self.create_timer(self.diagnostics_period, self.publish_diagnostics,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f'thermal_monitor: T_p {config.threshold} degC, cap '
                                f'{config.camera_cap} degC')
+
+    def on_joint_state(self, msg):
+        """Merge a (partial) joint state into the buffer."""
+        problem = self.joints.add_message(msg)
+        if problem:
+            self.get_logger().warn(problem, throttle_duration_sec=5.0)
 
     def on_camera_info(self, msg):
         """Keep the thermal intrinsics (for the hottest pixel's ground point)."""
         try:
-            self.camera = camera_from_info(msg.k, msg.d, msg.width, msg.height)
+            self.camera = camera_from_info(msg)
         except ValueError as error:
             self.get_logger().warn(f'ignoring /thermal/camera_info: {error}',
                                    throttle_duration_sec=5.0)
@@ -94,7 +114,9 @@ class ThermalMonitorNode(Node):
     def on_image(self, msg):
         """Compute and publish the statistics of one thermal image."""
         started = time.perf_counter()
-        self.stats.frame(stamp_seconds(msg.header.stamp))
+        self.freshness.seen(self.get_clock().now().nanoseconds * 1e-9, time.monotonic())
+        stamp = stamp_to_seconds(msg.header.stamp)
+        self.stats.frame(stamp)
         try:
             image = image_to_numpy(msg)
             result = self.analyzer.statistics(image, msg.encoding)
@@ -102,26 +124,32 @@ class ThermalMonitorNode(Node):
             self.stats.bad_frame(str(error))
             self.get_logger().warn(f'thermal image skipped: {error}', throttle_duration_sec=2.0)
             return
+        self.ignored_pixels = result.ignored
+        if result.ignored:
+            self.get_logger().warn(f'{result.ignored} thermal pixel(s) ignored: no reading '
+                                   f'(non-finite, or above the {result.camera_cap:g} degC cap)',
+                                   throttle_duration_sec=10.0)
         out = ThermalStats()
         out.header.stamp = msg.header.stamp
         out.header.frame_id = msg.header.frame_id or self.frame_id
         out.t_max, out.threshold, out.n_p = result.t_max, result.threshold, result.n_p
         out.hottest_u, out.hottest_v = result.hottest_u, result.hottest_v
         out.saturated, out.camera_cap = result.saturated, result.camera_cap
-        point = self.hottest_ground_point(result.hottest_u, result.hottest_v, image.shape)
+        point = self.hottest_ground_point(result.hottest_u, result.hottest_v, image.shape,
+                                          stamp)
         if point is not None:
             out.hottest_point_valid = True
             out.hottest_point = Point(x=float(point[0]), y=float(point[1]), z=0.0)
         self.stats_pub.publish(out)
         self.stats.result(True, milliseconds=(time.perf_counter() - started) * 1e3)
 
-    def hottest_ground_point(self, u, v, shape):
-        """Return the world ground point seen by pixel (u, v), or None if the pose is unknown."""
-        if self.rig is None or self.camera is None:
+    def hottest_ground_point(self, u, v, shape, stamp):
+        """Return the world ground point pixel (u, v) saw at `stamp` [s], None if unknown."""
+        if not self.locate_hottest or self.camera is None:
             return None
         if (self.camera.height, self.camera.width) != tuple(shape):
             return None
-        joints = self.joints.positions(self.joint_state_timeout)
+        joints = self.joints.at(stamp, self.joint_state_tolerance).positions
         if joints is None:
             return None
         pose = self.rig.forward(joints)
@@ -131,10 +159,20 @@ class ThermalMonitorNode(Node):
         return None if np.any(np.isnan(point)) else point
 
     def publish_diagnostics(self):
-        """Publish the frame counters on /diagnostics."""
-        self.diagnostics_pub.publish(diagnostics(self, 'thermal_monitor: frames',
-                                                 self.stats.as_dict(),
-                                                 self.get_clock().now().to_msg()))
+        """Publish the frame counters and the input's health on /diagnostics."""
+        node_now, wall_now = self.get_clock().now().nanoseconds * 1e-9, time.monotonic()
+        values = self.stats.as_dict()
+        node_age, wall_age = self.freshness.ages(node_now, wall_now)
+        values['input_age_node_clock'], values['input_age_wall'] = node_age, wall_age
+        values['pixels_ignored_last_frame'] = self.ignored_pixels
+        warning = f'{self.ignored_pixels} pixel(s) of the last frame are no reading' \
+            if self.ignored_pixels else ''
+        level, message = self.stats.health(self.freshness.stale(node_now, wall_now), warning)
+        self.diagnostics_pub.publish(diagnostic_array(
+            self.get_name(), 'thermal_monitor: frames', values, self.get_clock().now().to_msg(),
+            level, message))
+        if level == ERROR:
+            self.get_logger().warn(message, throttle_duration_sec=10.0)
 
 
 def main(args=None):

@@ -1,6 +1,8 @@
 """Frame counters: drops estimated from stamp gaps, reasons grouped."""
 
-from helio_perception.frame_statistics import FrameStatistics
+from helio_optics.node_kit.diagnostics import ERROR, OK, WARN
+from helio_perception.frame_statistics import FrameStatistics, InputFreshness
+import pytest
 
 
 def test_drops_are_estimated_from_gaps_in_a_30_hz_stream():
@@ -32,3 +34,30 @@ def test_reasons_are_grouped_and_counted():
     assert values['frames_published'] == 4 and values['frames_invalid'] == 3
     assert values['frames_malformed'] == 1 and values['processing_ms_max'] == 2.5
     assert 'frames_received 1' in stats.summary()
+
+
+def test_input_is_stale_on_either_clock():
+    freshness = InputFreshness('thermal/image_raw', timeout=2.0, wall_timeout=5.0, wall_now=100.0)
+    assert freshness.stale(0.0, 104.0) == ''          # nothing yet, but only 4 s of wall time
+    assert 'since the start' in freshness.stale(0.0, 105.5)
+    freshness.seen(1000.0, 106.0)
+    assert freshness.stale(1001.5, 107.0) == ''
+    # the node clock ran on (simulated time at 10x) while little wall time passed
+    assert 'stale' in freshness.stale(1002.5, 106.3)
+    # /clock stopped: the node clock stands still, the wall clock does not
+    reason = freshness.stale(1000.0, 111.5)
+    assert 'stale' in reason and '0.0 s of node time' in reason and '5.5 s of wall' in reason
+    assert freshness.ages(1000.5, 107.0) == (0.5, 1.0)
+    with pytest.raises(ValueError, match='timeouts'):
+        InputFreshness('x', 0.0, 1.0, 0.0)
+
+
+def test_health_is_error_when_stale_warn_on_malformed_frames_ok_otherwise():
+    stats = FrameStatistics()
+    assert stats.health() == (OK, '')
+    stats.bad_frame('bad encoding')
+    level, message = stats.health()
+    assert level == WARN and '1 malformed' in message
+    assert stats.health() == (OK, '')                 # counted once, since the last report
+    assert stats.health(warning='no camera_info yet') == (WARN, 'no camera_info yet')
+    assert stats.health('input stale: ...', 'x') == (ERROR, 'input stale: ...')

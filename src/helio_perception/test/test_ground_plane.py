@@ -4,7 +4,7 @@ from helio_optics.geometry import (
     intersect_plane, invert_transform, look_at, matrix_from_quaternion, PinholeCamera,
     transform_points, transform_vectors)
 from helio_perception.ground_plane import (
-    camera_from_info, GroundMapping, MarkerConfig, MarkerDetector, MarkerPoseTracker)
+    GroundMapping, MarkerConfig, MarkerDetector, MarkerPoseTracker)
 from helio_perception.spot_detection import to_gray
 from helio_perception.synthetic_scene import SyntheticScene
 import numpy as np
@@ -58,15 +58,6 @@ def test_pixels_above_the_horizon_have_no_ground_point():
     rising = transform_vectors(T_world_camera, camera.pixel_rays(pixels))[:, 2] >= 0
     assert rising.tolist() in ([True, False], [False, True])  # one row sees the sky
     assert np.all(np.isnan(ground[rising])) and np.all(ground[~rising][:, 0] > 0.0)
-
-
-def test_camera_from_info_checks_its_input():
-    camera = camera_from_info([500, 0, 320, 0, 500, 240, 0, 0, 1], [0.1, 0.01], 640, 480)
-    assert camera.distortion.tolist() == [0.1, 0.01, 0.0, 0.0, 0.0]
-    with pytest.raises(ValueError, match='intrinsic'):
-        camera_from_info([0.0] * 9, [], 640, 480)
-    with pytest.raises(ValueError, match='empty'):
-        camera_from_info([500, 0, 320, 0, 500, 240, 0, 0, 1], [], 0, 480)
 
 
 def test_marker_pose_matches_the_rendering_pose(scene):

@@ -1,215 +1,225 @@
-"""In-process tests of spot_detector and thermal_monitor with a private rclpy Context."""
+"""
+spot_detector and thermal_monitor in the kit's InProcessGraph, fed as the real graph does.
 
+Joint states come in two partial messages (arm from dobot_driver, wrist from servo_driver)
+stamped near each image; camera_info comes from the kit's converter.
+"""
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from helio_msgs.msg import SpotObservation, ThermalStats
 from helio_optics.geometry import invert_transform, transform_points
 from helio_optics.lens import LensParameters
-from helio_optics.rig_kinematics import JOINT_NAMES, Rig
+from helio_optics.node_kit.conversions import camera_info_from_camera, numpy_to_image
+from helio_optics.node_kit.conversions import stamp_from_seconds
+from helio_optics.node_kit.in_process_graph import InProcessGraph
+from helio_optics.rig_kinematics import Rig
+from helio_perception import spot_detection
 from helio_perception.ground_plane import GroundMapping
-from helio_perception.image_conversion import numpy_to_image
 from helio_perception.spot_detector_node import SpotDetectorNode
 from helio_perception.spot_observer import optics_from_world
 from helio_perception.synthetic_scene import SyntheticScene
 from helio_perception.thermal_monitor_node import ThermalMonitorNode
 import numpy as np
 import pytest
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
 JOINTS = np.array([0.1, 0.6, 0.3, 0.2, -0.1])
-TIMEOUT = 15.0
 
 
 @pytest.fixture
-def ros():
-    """Yield (context, executor, helper node); shut everything down afterwards."""
-    context = Context()
-    rclpy.init(context=context)
-    executor = SingleThreadedExecutor(context=context)
-    helper = rclpy.create_node('perception_test_helper', context=context)
-    executor.add_node(helper)
-    try:
-        yield context, executor, helper
-    finally:
-        executor.shutdown()
-        helper.destroy_node()
-        rclpy.shutdown(context=context)
+def graph():
+    """Yield an InProcessGraph; close it afterwards."""
+    with InProcessGraph('perception_test_helper') as in_process:
+        yield in_process
 
 
-def camera_info(camera, stamp, frame_id):
-    """Return a CameraInfo message of a PinholeCamera."""
-    info = CameraInfo()
-    info.header.stamp, info.header.frame_id = stamp, frame_id
-    info.width, info.height = camera.width, camera.height
-    info.distortion_model = 'plumb_bob'
-    info.d = [float(v) for v in camera.distortion]
-    info.k = [float(v) for v in camera.matrix.ravel()]
-    return info
+def joint_state_parts(seconds, joints=JOINTS):
+    """Return the two partial JointStates the drivers publish for joints x at `seconds`."""
+    stamp = stamp_from_seconds(seconds)
+    arm, wrist = JointState(), JointState()
+    arm.header.stamp = wrist.header.stamp = stamp
+    arm.name = ['dobot_j1', 'dobot_j2', 'dobot_j3', 'dobot_j4']
+    arm.position = [float(v) for v in joints[:3]] + [0.0]
+    wrist.name = ['lens_yaw', 'lens_pitch']
+    wrist.position = [float(v) for v in joints[3:]]
+    return arm, wrist
 
 
-def joint_state(stamp, joints=JOINTS):
-    """Return a JointState with the five rig joints."""
-    msg = JointState()
-    msg.header.stamp = stamp
-    msg.name = list(JOINT_NAMES)
-    msg.position = [float(v) for v in joints]
-    return msg
+class Feeder:
+    """Publishers of the helper node for one camera's topics and the joint states."""
+
+    def __init__(self, graph, camera_topic):
+        self.graph = graph
+        self.images = graph.helper.create_publisher(Image, f'{camera_topic}/image_raw', 10)
+        self.infos = graph.helper.create_publisher(CameraInfo, f'{camera_topic}/camera_info',
+                                                   10)
+        self.joints = graph.helper.create_publisher(JointState, 'joint_states', 10)
+        graph.wait_until(lambda: min(p.get_subscription_count() for p in
+                                     (self.images, self.infos, self.joints)) > 0,
+                         what='the node subscribing to its inputs')
+
+    def joint_states(self, seconds, joints=JOINTS):
+        """Publish joints x at `seconds` as the two drivers would."""
+        for part in joint_state_parts(seconds, joints):
+            self.joints.publish(part)
+
+    def image(self, array, encoding, seconds, **options):
+        """Publish an image stamped `seconds`, with the joints at the same stamp."""
+        message = numpy_to_image(array, encoding, **options)
+        message.header.stamp = stamp_from_seconds(seconds)
+        self.images.publish(message)
 
 
-class Collector:
-    """Collect messages; `wait_for` spins until the n-th one arrived."""
-
-    def __init__(self):
-        self.messages = []
-
-    def __call__(self, msg):
-        self.messages.append(msg)
-
-    def wait_for(self, executor, count):
-        return wait_until(executor, lambda: len(self.messages) >= count)
-
-
-def wait_until(executor, condition, timeout=TIMEOUT):
-    """Spin until `condition()` holds or the timeout passes; return whether it holds."""
-    remaining = timeout
-    while not condition() and remaining > 0:
-        executor.spin_once(timeout_sec=0.05)
-        remaining -= 0.05
-    return condition()
-
-
-def stamp_at(_node, seconds):
-    """Return a builtin_interfaces/Time at `seconds`."""
-    return rclpy.time.Time(seconds=seconds).to_msg()
-
-
-def test_spot_detector_publishes_observations_and_survives_bad_frames(ros):
-    context, executor, helper = ros
+def test_spot_detector_publishes_observations_and_survives_bad_frames(graph):
     scene = SyntheticScene(640, 480)
     rng = np.random.default_rng(77)
-    T_world_camera, (spot,) = scene.random_view(rng)
+    T_world_camera, (spot,) = scene.random_view(rng, spot_options={'value': 0.8})
     frame = scene.render(T_world_camera, [spot], rng=rng)
-    node = SpotDetectorNode(context=context, parameter_overrides=[
-        Parameter('marker.side', value=scene.marker_side)])
-    executor.add_node(node)
-    try:
-        received = Collector()
-        helper.create_subscription(SpotObservation, 'spot', received, 10)
-        images = helper.create_publisher(Image, 'rgb/image_raw', 10)
-        infos = helper.create_publisher(CameraInfo, 'rgb/camera_info', 10)
-        joints = helper.create_publisher(JointState, 'joint_states', 10)
-        assert wait_until(executor, lambda: images.get_subscription_count() > 0
-                          and infos.get_subscription_count() > 0
-                          and joints.get_subscription_count() > 0
-                          and helper.count_publishers('spot') > 0)
-        infos.publish(camera_info(scene.camera, stamp_at(helper, 10.0), 'rgb'))
-        joints.publish(joint_state(stamp_at(helper, 10.0)))
-        assert wait_until(executor, lambda: node.camera is not None
-                          and node.joints.positions() is not None)
-        # a malformed frame first: logged, counted, skipped
-        bad = numpy_to_image(frame.image, 'rgb8')
-        bad.step = 10
-        bad.header.stamp = stamp_at(helper, 10.0)
-        images.publish(bad)
-        good = numpy_to_image(frame.image, 'rgb8')
-        good.header.stamp = stamp_at(helper, 10.1)
-        images.publish(good)
-        assert received.wait_for(executor, 1)
-        first = received.messages[0]
-        assert first.valid, first.reason
-        assert node.stats.malformed == 1
-        assert np.hypot(first.center.x - spot.center[0], first.center.y - spot.center[1]) < 2e-4
-        assert first.area == pytest.approx(spot.area, rel=0.03)
-        assert first.marker_pose_age == 0.0 and first.header.frame_id == 'world'
-        # Eq 10 features in the optics frame of the lens at JOINTS
-        rig = node.rig
-        T_optics_world = optics_from_world(rig.forward(JOINTS).T_robot_lens,
-                                           LensParameters().T_lens_optics,
-                                           rig.parameters.T_robot_world)
-        truth = transform_points(T_optics_world, [spot.center[0], spot.center[1], 0.0])
-        assert first.feature_frame == 'optics'
-        assert first.pi_feature == pytest.approx(np.hypot(truth[0], truth[1]), abs=2e-4)
-        assert first.theta_feature == pytest.approx(np.arctan2(truth[1], truth[0]), abs=5e-3)
-        # the same joints: detected once more (the joints are now known to be still), then
-        # the cached marker pose is reused, 0.2 s old
-        for seconds in (10.3, 10.5):
-            again = numpy_to_image(frame.image, 'rgb8')
-            again.header.stamp = stamp_at(helper, seconds)
-            images.publish(again)
-        assert received.wait_for(executor, 3)
-        assert received.messages[1].valid and received.messages[1].marker_pose_age == 0.0
-        assert received.messages[2].valid
-        assert received.messages[2].marker_pose_age == pytest.approx(0.2, abs=1e-6)
-        assert node.observer.tracker.counts['cache'] == 1
-        # a frame without the marker, after the joints moved: invalid with the reason
-        joints.publish(joint_state(stamp_at(helper, 10.6), JOINTS + 0.05))
-        assert wait_until(executor, lambda: np.allclose(node.joints.positions(), JOINTS + 0.05))
-        plain = numpy_to_image(scene.render(T_world_camera, [spot], rng=rng,
-                                            with_marker=False).image, 'rgb8')
-        plain.header.stamp = stamp_at(helper, 10.7)
-        images.publish(plain)
-        assert received.wait_for(executor, 4)
-        third = received.messages[3]
-        assert not third.valid and 'marker 0' in third.reason
-        assert node.stats.as_dict()['frames_invalid'] == 1
-    finally:
-        executor.remove_node(node)
-        node.destroy_node()
+    node = graph.add(SpotDetectorNode(**graph.node_options(**{'marker.side': scene.marker_side})))
+    received = graph.collect(SpotObservation, 'spot')
+    feed = Feeder(graph, 'rgb')
+    feed.infos.publish(camera_info_from_camera(scene.camera, stamp_from_seconds(10.0), 'rgb'))
+    for seconds in (10.0, 10.1):
+        feed.joint_states(seconds)
+    graph.wait_until(lambda: node.camera is not None and node.joints.at(10.1, 0.0),
+                     what='camera_info and both joint-state parts')
+    # a malformed frame first: logged, counted, skipped
+    bad = numpy_to_image(frame.image, 'rgb8')
+    bad.step = 10
+    bad.header.stamp = stamp_from_seconds(10.0)
+    feed.images.publish(bad)
+    feed.image(frame.image, 'rgb8', 10.1)
+    first = received.wait_for_count(1)[0]
+    assert first.valid, first.reason
+    assert node.stats.malformed == 1
+    assert np.hypot(first.center.x - spot.center[0], first.center.y - spot.center[1]) < 2e-4
+    assert first.area == pytest.approx(spot.area, rel=0.03)
+    assert first.marker_pose_age == 0.0 and first.header.frame_id == 'world'
+    assert first.quality == SpotObservation.FULL and first.quality_reason == ''
+    # Eq 10 features in the optics frame of the lens at JOINTS
+    rig = node.rig
+    T_optics_world = optics_from_world(rig.forward(JOINTS).T_robot_lens,
+                                       LensParameters().T_lens_optics,
+                                       rig.parameters.T_robot_world)
+    truth = transform_points(T_optics_world, [spot.center[0], spot.center[1], 0.0])
+    assert first.feature_frame == 'optics'
+    assert first.pi_feature == pytest.approx(np.hypot(truth[0], truth[1]), abs=2e-4)
+    assert first.theta_feature == pytest.approx(np.arctan2(truth[1], truth[0]), abs=5e-3)
+    # the same joints: detected once more (the joints are now known to be still), then
+    # the cached marker pose is reused, 0.2 s old
+    for seconds in (10.3, 10.5):
+        feed.joint_states(seconds)
+    graph.wait_until(lambda: node.joints.at(10.5, 0.0), what='the joints at 10.5 s')
+    for seconds in (10.3, 10.5):
+        feed.image(frame.image, 'rgb8', seconds)
+    received.wait_for_count(3)
+    assert received.messages[1].valid and received.messages[1].marker_pose_age == 0.0
+    assert received.messages[2].valid
+    assert received.messages[2].marker_pose_age == pytest.approx(0.2, abs=1e-6)
+    assert node.observer.tracker.counts['cache'] == 1
+    # a frame without the marker, after the joints moved: invalid with the reason
+    feed.joint_states(10.7, JOINTS + 0.05)
+    graph.wait_until(lambda: node.joints.at(10.7, 0.0), what='the moved joints')
+    feed.image(scene.render(T_world_camera, [spot], rng=rng, with_marker=False).image,
+               'rgb8', 10.7)
+    third = received.wait_for_count(4)[3]
+    assert not third.valid and 'marker 0' in third.reason
+    assert node.stats.as_dict()['frames_invalid'] == 1
 
 
-def test_thermal_monitor_publishes_stats_with_the_hottest_ground_point(ros):
-    context, executor, helper = ros
-    node = ThermalMonitorNode(context=context)
-    executor.add_node(node)
-    try:
-        received = Collector()
-        helper.create_subscription(ThermalStats, 'thermal/stats', received, 10)
-        images = helper.create_publisher(Image, 'thermal/image_raw', 10)
-        infos = helper.create_publisher(CameraInfo, 'thermal/camera_info', 10)
-        joints = helper.create_publisher(JointState, 'joint_states', 10)
-        assert wait_until(executor, lambda: images.get_subscription_count() > 0
-                          and infos.get_subscription_count() > 0
-                          and joints.get_subscription_count() > 0
-                          and helper.count_publishers('thermal/stats') > 0)
-        scene = SyntheticScene(160, 120, horizontal_fov=np.radians(57.0), supersample=1)
-        camera = scene.camera
-        infos.publish(camera_info(camera, stamp_at(helper, 1.0), 'thermal'))
-        joints.publish(joint_state(stamp_at(helper, 1.0)))
-        assert wait_until(executor, lambda: node.camera is not None
-                          and node.joints.positions() is not None)
-        # where does the thermal camera look at JOINTS? put the hot dot on a ground point
-        rig = Rig(node.rig.parameters)
-        T_world_thermal = invert_transform(rig.parameters.T_robot_world) @ \
-            rig.forward(JOINTS).T_robot_thermal
-        centre = GroundMapping(camera, T_world_thermal).pixels_to_ground([[80.0, 60.0]])[0]
-        target = centre + np.array([0.004, -0.003, 0.0])
-        u, v = np.rint(camera.project(transform_points(invert_transform(T_world_thermal),
-                                                       target))[0]).astype(int)
-        raw = np.full((120, 160), 29815, np.uint16)  # 25 degC
-        raw[v - 2:v + 3, u - 2:u + 3] = 40000        # 126.85 degC
-        raw[v - 1:v + 2, u - 1:u + 2] = 45405        # at the cap, 180.9 degC: 9 pixels
-        raw[v, u] = 45405
-        msg = numpy_to_image(raw, '16UC1', is_bigendian=True, step=160 * 2 + 8)
-        msg.header.stamp, msg.header.frame_id = stamp_at(helper, 1.1), 'thermal'
-        bad = numpy_to_image(raw, '16UC1')
-        bad.encoding = 'bayer_rggb16'
-        images.publish(bad)
-        images.publish(msg)
-        assert received.wait_for(executor, 1)
-        stats = received.messages[0]
-        assert stats.n_p == 9 and stats.t_max == pytest.approx(180.9, abs=1e-9)
-        assert stats.saturated and stats.camera_cap == pytest.approx(180.9)
-        assert (stats.hottest_u, stats.hottest_v) in {(u + du, v + dv) for du in (-1, 0, 1)
-                                                      for dv in (-1, 0, 1)}
-        assert stats.hottest_point_valid
-        # one thermal pixel covers a few mm here: the hottest pixel is within 1.5 pixels
-        footprint = np.linalg.norm(np.subtract(*GroundMapping(camera, T_world_thermal)
-                                               .pixels_to_ground([[u, v], [u + 1, v]])))
-        error = np.hypot(stats.hottest_point.x - target[0], stats.hottest_point.y - target[1])
-        assert error < 1.5 * footprint
-        assert node.stats.malformed == 1
-    finally:
-        executor.remove_node(node)
-        node.destroy_node()
+def test_thermal_monitor_publishes_stats_with_the_hottest_ground_point(graph):
+    node = graph.add(ThermalMonitorNode(**graph.node_options()))
+    received = graph.collect(ThermalStats, 'thermal/stats')
+    feed = Feeder(graph, 'thermal')
+    scene = SyntheticScene(160, 120, horizontal_fov=np.radians(57.0), supersample=1)
+    camera = scene.camera
+    feed.infos.publish(camera_info_from_camera(camera, stamp_from_seconds(1.0), 'thermal'))
+    feed.joint_states(1.1)
+    graph.wait_until(lambda: node.camera is not None and node.joints.at(1.1, 0.0),
+                     what='camera_info and both joint-state parts')
+    # where does the thermal camera look at JOINTS? put the hot dot on a ground point
+    rig = Rig(node.rig.parameters)
+    T_world_thermal = invert_transform(rig.parameters.T_robot_world) @ \
+        rig.forward(JOINTS).T_robot_thermal
+    centre = GroundMapping(camera, T_world_thermal).pixels_to_ground([[80.0, 60.0]])[0]
+    target = centre + np.array([0.004, -0.003, 0.0])
+    u, v = np.rint(camera.project(transform_points(invert_transform(T_world_thermal),
+                                                   target))[0]).astype(int)
+    raw = np.full((120, 160), 29815, np.uint16)  # 25 degC
+    raw[v - 2:v + 3, u - 2:u + 3] = 40000        # 126.85 degC
+    raw[v - 1:v + 2, u - 1:u + 2] = 45405        # at the cap, 180.9 degC: 9 pixels
+    raw[v, u] = 45405
+    msg = numpy_to_image(raw, '16UC1', is_bigendian=True, step=160 * 2 + 8)
+    msg.header.stamp, msg.header.frame_id = stamp_from_seconds(1.1), 'thermal'
+    bad = numpy_to_image(raw, '16UC1')
+    bad.encoding = 'bayer_rggb16'
+    feed.images.publish(bad)
+    feed.images.publish(msg)
+    stats = received.wait_for_count(1)[0]
+    assert stats.n_p == 9 and stats.t_max == pytest.approx(180.9, abs=1e-9)
+    assert stats.saturated and stats.camera_cap == pytest.approx(180.9)
+    assert (stats.hottest_u, stats.hottest_v) in {(u + du, v + dv) for du in (-1, 0, 1)
+                                                  for dv in (-1, 0, 1)}
+    assert stats.hottest_point_valid
+    # one thermal pixel covers a few mm here: the hottest pixel is within 1.5 pixels
+    footprint = np.linalg.norm(np.subtract(*GroundMapping(camera, T_world_thermal)
+                                           .pixels_to_ground([[u, v], [u + 1, v]])))
+    error = np.hypot(stats.hottest_point.x - target[0], stats.hottest_point.y - target[1])
+    assert error < 1.5 * footprint
+    assert node.stats.malformed == 1
+
+
+def test_the_quality_constants_are_the_message_constants():
+    for name in ('NONE', 'FULL', 'CUT_BY_BORDER', 'OCCLUDED', 'BLURRED'):
+        assert getattr(spot_detection, f'QUALITY_{name}') == getattr(SpotObservation, name)
+
+
+def node_status(graph, name):
+    """Collect /diagnostics and return a function giving the statuses named `name`."""
+    arrays = graph.collect(DiagnosticArray, '/diagnostics')
+    return lambda: [s for array in arrays.messages for s in array.status if s.name == name], \
+        arrays
+
+
+def test_thermal_monitor_reports_its_input_stopped_with_the_clock(graph):
+    """Issue 17 item 8: the world dies, /clock stops: the node must not look normal."""
+    node = graph.add(ThermalMonitorNode(**graph.node_options(
+        use_sim_time=True, diagnostics_period=0.1, input_timeout=1.0,
+        input_wall_timeout=0.6)))
+    statuses, arrays = node_status(graph, 'thermal_monitor: frames')
+    clock = graph.helper.create_publisher(Clock, '/clock', 10)
+    feed = Feeder(graph, 'thermal')
+    raw = np.full((120, 160), 29815, np.uint16)
+    seconds, healthy = 100.0, False
+    for _ in range(40):   # images and /clock flowing: OK
+        clock.publish(Clock(clock=stamp_from_seconds(seconds)))
+        feed.image(raw, '16UC1', seconds)
+        count = len(arrays.messages)
+        arrays.wait_for_count(count + 1)
+        healthy = any(s.level == DiagnosticStatus.OK for s in statuses()[-1:])
+        if healthy and node.stats.received > 0:
+            break
+        seconds += 0.05
+    assert healthy
+    # the world stops: no image, and the node clock stands still; wall time goes on
+    arrays.wait_until(lambda _: any(s.level == DiagnosticStatus.ERROR for s in statuses()),
+                      what='an ERROR status')
+    error = [s for s in statuses() if s.level == DiagnosticStatus.ERROR][0]
+    assert 'stale' in error.message and 'thermal/image_raw' in error.message
+    assert '0.0 s of node time' in error.message
+    values = {v.key: v.value for v in error.values}
+    assert float(values['input_age_wall']) > 0.6
+
+
+def test_spot_detector_reports_stale_input_and_missing_camera_info(graph):
+    graph.add(SpotDetectorNode(**graph.node_options(
+        diagnostics_period=0.1, input_timeout=0.4, input_wall_timeout=0.4)))
+    statuses, arrays = node_status(graph, 'spot_detector: frames')
+    arrays.wait_until(lambda _: any(s.level == DiagnosticStatus.WARN for s in statuses()),
+                      what='a WARN status')
+    assert 'camera_info' in [s for s in statuses() if s.level == DiagnosticStatus.WARN][0].message
+    arrays.wait_until(lambda _: any(s.level == DiagnosticStatus.ERROR for s in statuses()),
+                      what='an ERROR status')
+    error = [s for s in statuses() if s.level == DiagnosticStatus.ERROR][0]
+    assert 'no rgb/image_raw since the start' in error.message

@@ -1,6 +1,6 @@
 """Thermal statistics against direct counts on synthetic Lepton-like frames."""
 
-from helio_perception.image_conversion import image_to_numpy, numpy_to_image
+from helio_optics.node_kit.conversions import image_to_numpy, numpy_to_image
 from helio_perception.thermal import raw_threshold, ThermalAnalyzer, ThermalConfig
 import numpy as np
 import pytest
@@ -83,12 +83,73 @@ def test_nan_pixels_are_ignored_and_bad_input_is_refused():
     celsius = np.full((4, 4), 20.0, np.float32)
     celsius[1, 2] = 190.0
     celsius[0, 0] = np.nan
-    stats = ThermalAnalyzer().statistics(celsius, '32FC1')
+    stats = ThermalAnalyzer(ThermalConfig(camera_cap=200.0)).statistics(celsius, '32FC1')
     assert (stats.t_max, stats.n_p, stats.hottest_u, stats.hottest_v) == (190.0, 1, 2, 1)
-    with pytest.raises(ValueError, match='all NaN'):
+    with pytest.raises(ValueError, match='no plausible pixel'):
         ThermalAnalyzer().statistics(np.full((2, 2), np.nan, np.float32), '32FC1')
     with pytest.raises(ValueError, match="got 'rgb8'"):
         ThermalAnalyzer().statistics(np.zeros((2, 2), np.uint8), 'rgb8')
     with pytest.raises(ValueError, match='gain must be > 0'):
         ThermalAnalyzer(ThermalConfig(mono16_gain=0.0)).statistics(
             np.zeros((2, 2), np.uint16), 'mono16')
+
+
+def test_non_finite_32fc1_pixels_are_ignored_not_read():
+    """Finding 9: +inf counted as a reading (T_max inf, N_p + 1) while NaN was ignored."""
+    celsius = np.full((120, 160), 25.0, np.float32)
+    celsius[50, 60] = 181.5
+    celsius[10, 10], celsius[11, 11], celsius[12, 12] = np.inf, -np.inf, np.nan
+    stats = ThermalAnalyzer().statistics(celsius, '32FC1')
+    assert stats.t_max == pytest.approx(181.5) and (stats.hottest_u, stats.hottest_v) == (60, 50)
+    assert stats.n_p == 1 and stats.ignored == 3
+    with pytest.raises(ValueError, match='no plausible pixel'):
+        ThermalAnalyzer().statistics(np.full((2, 2), np.inf, np.float32), '32FC1')
+
+
+def test_a_stuck_pixel_above_the_camera_cap_is_ignored():
+    """Finding 9: a stuck 65535 cK pixel reported 382 degC from a camera capped at 180.9."""
+    raw = lepton_frame(4, peak=150.0)
+    hottest = raw.max()
+    raw[7, 9] = 65535
+    stats = ThermalAnalyzer().statistics(raw, '16UC1')
+    assert stats.t_max == pytest.approx(hottest / 100.0 - 273.15, abs=1e-9)
+    assert stats.ignored == 1 and not stats.saturated and stats.n_p == 0
+    # a reading within the margin above the cap is still a reading (at the cap: saturated)
+    raw[7, 9] = CAP_RAW + 50   # 0.5 K above
+    stats = ThermalAnalyzer().statistics(raw, '16UC1')
+    assert stats.ignored == 0 and stats.saturated and stats.n_p == 1
+
+
+def test_a_big_endian_array_is_read_by_value():
+    """Finding 9: a big-endian uint16 array was misread (or refused as 'not uint16')."""
+    raw = lepton_frame(5)
+    swapped = raw.astype('>u2')
+    assert swapped.dtype != np.uint16 and np.array_equal(swapped, raw)
+    analyzer = ThermalAnalyzer()
+    assert analyzer.statistics(swapped, '16UC1') == analyzer.statistics(raw, '16UC1')
+    with pytest.raises(ValueError, match='16-bit integer'):
+        analyzer.statistics(raw.astype(np.float32), '16UC1')
+
+
+@pytest.mark.parametrize('encoding', ['16UC1', 'mono16', '32FC1'])
+def test_a_reading_exactly_at_t_p_counts_for_every_decimal_threshold(encoding):
+    """Finding 9: 238.9 degC = 51205 cK read 238.89999999999998 < T_p: the pixel was missed."""
+    missed = []
+    for tenths in range(-300, 3820, 7):   # 16UC1 reaches 382.35 degC
+        threshold = tenths / 10.0
+        config = ThermalConfig(threshold=threshold, camera_cap=700.0, mono16_gain=0.05,
+                               mono16_offset=-300.0)
+        if encoding == '16UC1':
+            at, below = np.uint16(round((threshold + 273.15) * 100)), -1
+        elif encoding == 'mono16':
+            at, below = np.uint16(round((threshold + 300.0) / 0.05)), -1
+        else:
+            at, below = np.float32(threshold), -0.01
+        image = np.zeros((2, 2), type(at)) if encoding != '32FC1' else \
+            np.full((2, 2), -100.0, np.float32)
+        image[0, 0] = at
+        image[1, 1] = at + below if encoding == '32FC1' else at - 1
+        stats = ThermalAnalyzer(config).statistics(image, encoding)
+        if stats.n_p != 1:
+            missed.append((threshold, stats.n_p))
+    assert not missed, missed[:5]
