@@ -13,6 +13,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         (os.path.join('share', package_name, 'config'), glob('config/*.yaml')),
+        (os.path.join('share', package_name, 'launch'), glob('launch/*.launch.py')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -23,6 +24,11 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'lens_planner = helio_control.lens_planner_node:main',
+            'painter = helio_control.painter_node:main',
+            'helio = helio_control.cli:main',
+            'recorder = helio_control.recorder:main',
+            'replayer = helio_control.replay:main',
         ],
     },
 )

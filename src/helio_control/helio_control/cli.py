@@ -1,0 +1,598 @@
+"""
+The ``helio`` command: run the graph, paint, record, replay, report.
+
+::
+
+    helio sim [--real-time-factor X] [--out DIR] [--nodes ...] [--set NODE.PARAM=VALUE]
+    helio rig --dobot-port PORT|auto --servo-port PORT [--rgb-camera PKG/EXE] ...
+    helio preview PICTURE --out DIR [options]       (no graph needed)
+    helio paint PICTURE [goal options] [--out DIR]
+    helio record --out DIR [--camera-decimation N] [--sim-time] | --recover BAG
+    helio replay BAG [--rate R] [--delay S] [--exclude TOPIC ...]
+    helio report RUN_DIR
+
+Every sub-command has ``--help``. Exit status: 0 done, 1 failed (one line on stderr, no
+traceback), 2 bad usage, 130 interrupted (Ctrl-C). The options of ``paint`` are generated
+from the fields of the PaintPattern goal (``goal_options``), so a field added to the action
+is an option at once.
+"""
+
+import argparse
+import datetime
+import math
+import os
+import sys
+import tempfile
+import threading
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+# USB ids of the Dobot Magician's USB-serial adapter: Silicon Labs CP210x on the original
+# board, WCH CH340 on later ones. Both are common chips: a second adapter of the same kind
+# makes `--dobot-port auto` refuse to guess.
+DOBOT_USB_IDS = ((0x10C4, 0xEA60), (0x1A86, 0x7523))
+GOAL_SOURCE_FIELDS = ('image_path', 'image')     # set from PICTURE, not options
+
+
+class CommandError(Exception):
+    """A failure reported as one line and exit status 1."""
+
+
+# ---------------------------------------------------------------------------- paint options
+def goal_options(goal_type):
+    """
+    Return [(field, kind, option name)] for the goal's fields that the command line sets.
+
+    kind is 'float', 'int' (unsigned: >= 0), 'signed', 'str', 'bool' or 'points' (a
+    sequence of geometry_msgs/Point given as X,Y pairs). Fields of other types (and the
+    picture's own fields) are left out.
+    """
+    kinds = {'double': 'float', 'float': 'float', 'string': 'str', 'boolean': 'bool',
+             'sequence<geometry_msgs/Point>': 'points'}
+    for bits in ('8', '16', '32', '64'):
+        kinds[f'uint{bits}'] = 'int'
+        kinds[f'int{bits}'] = 'signed'
+    options = []
+    for name, idl_type in goal_type.get_fields_and_field_types().items():
+        if name in GOAL_SOURCE_FIELDS or idl_type not in kinds:
+            continue
+        options.append((name, kinds[idl_type], '--' + name.replace('_', '-')))
+    return options
+
+
+def _non_negative_int(text):
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f'must be >= 0, not {value}')
+    return value
+
+
+def _positive_int(text):
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'must be >= 1, not {value}')
+    return value
+
+
+def _finite_float(text):
+    value = float(text)
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f'must be a finite number, not {text}')
+    return value
+
+
+def _point(text):
+    try:
+        x, y = (float(v) for v in text.split(','))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'a point is X,Y in metres, not {text!r}') from None
+    return x, y
+
+
+def add_goal_options(parser, goal_type):
+    """Add one option per goal field (see `goal_options`)."""
+    group = parser.add_argument_group('PaintPattern goal fields (unset: the painter default)')
+    for name, kind, option in goal_options(goal_type):
+        if kind == 'bool':
+            group.add_argument(option, dest=f'goal_{name}', action='store_true', default=None,
+                               help=f'goal field {name}')
+        elif kind == 'points':
+            group.add_argument(option, dest=f'goal_{name}', nargs='+', type=_point,
+                               metavar='X,Y', help=f'goal field {name}: world points [m]')
+        else:
+            convert = {'float': _finite_float, 'int': _non_negative_int, 'signed': int,
+                       'str': str}[kind]
+            group.add_argument(option, dest=f'goal_{name}', type=convert,
+                               help=f'goal field {name} ({kind})')
+
+
+def build_goal(goal_type, arguments, picture):
+    """Return the goal: `picture` as image_path, every option that was given."""
+    goal = goal_type()
+    if picture:
+        goal.image_path = picture
+    for name, kind, _ in goal_options(goal_type):
+        value = getattr(arguments, f'goal_{name}', None)
+        if value is None:
+            continue
+        if kind == 'points':
+            from geometry_msgs.msg import Point
+            value = [Point(x=x, y=y, z=0.0) for x, y in value]
+        setattr(goal, name, value)
+    return goal
+
+
+def resolve_picture(picture):
+    """Return the picture as the painter must read it: an absolute path or sample:NAME."""
+    if picture.startswith('sample:'):
+        from helio_control.samples import SAMPLE_NAMES
+        name = picture.split(':', 1)[1]
+        if name not in SAMPLE_NAMES:
+            raise CommandError(f'no sample picture {name!r} (samples: '
+                               f'{", ".join(SAMPLE_NAMES)})')
+        return picture
+    path = os.path.abspath(os.path.expanduser(picture))
+    if not os.path.isfile(path):
+        raise CommandError(f'picture not found: {picture}')
+    return path
+
+
+# ---------------------------------------------------------------------------- ports
+def find_dobot_port(ports=None):
+    """Return the serial port of the one connected Dobot (by its adapter's USB ids)."""
+    if ports is None:
+        from serial.tools import list_ports
+        ports = list_ports.comports()
+    found = [p for p in ports if (p.vid, p.pid) in DOBOT_USB_IDS]
+    known = ', '.join(f'{vid:04x}:{pid:04x}' for vid, pid in DOBOT_USB_IDS)
+    if not found:
+        listed = ', '.join(f'{p.device} ({p.vid or 0:04x}:{p.pid or 0:04x})' for p in ports)
+        raise CommandError(f'no Dobot found: no serial port with USB ids {known}; ports: '
+                           f'{listed or "none"} (is it plugged in and powered? give '
+                           '--dobot-port)')
+    if len(found) > 1:
+        raise CommandError('several serial ports could be the Dobot (' +
+                           ', '.join(p.device for p in found) + '): give --dobot-port')
+    return found[0].device
+
+
+# ---------------------------------------------------------------------------- graph commands
+def _overrides(settings):
+    overrides = {}
+    for setting in settings or ():
+        name, equals, text = setting.partition('=')
+        node, dot, parameter = name.partition('.')
+        if not equals or not dot or not node or not parameter:
+            raise CommandError(f'--set takes NODE.PARAMETER=VALUE, not {setting!r}')
+        import yaml
+        overrides.setdefault(node, {})[parameter] = yaml.safe_load(text)
+    return overrides
+
+
+def _announce(log_dir):
+    def started(group):
+        print(f'[helio] running {len(group.processes)} nodes (logs in {log_dir}); Ctrl-C '
+              'stops them', file=sys.stderr, flush=True)
+        for process in group.processes:
+            print(f'[helio]   {process.label} pid {process.pid}', file=sys.stderr, flush=True)
+    return started
+
+
+def command_sim(arguments):
+    """Start the simulated graph and supervise it."""
+    from helio_control.bringup import simulated_graph
+    overrides = _overrides(arguments.set)
+    world = overrides.setdefault('sim_world', {})
+    world.setdefault('real_time_factor', arguments.real_time_factor)
+    if arguments.out:
+        world.setdefault('output_dir', os.path.abspath(arguments.out))
+    port_dir = arguments.port_dir or tempfile.mkdtemp(prefix='helio_sim_ports_')
+    return _supervise(arguments, 'sim',
+                      lambda: simulated_graph(port_dir, arguments.nodes, overrides))
+
+
+def command_rig(arguments):
+    """Start the hardware graph and supervise it."""
+    from helio_control.bringup import CameraSpec, hardware_graph
+    dobot_port = arguments.dobot_port
+    if dobot_port == 'auto':
+        dobot_port = find_dobot_port()
+        print(f'[helio] Dobot found on {dobot_port}', file=sys.stderr)
+    for port in (dobot_port, arguments.servo_port):
+        if not os.path.exists(port):
+            raise CommandError(f'serial port {port} does not exist (plugged in? see '
+                               '"ls /dev/serial/by-id/"; --dobot-port auto finds a Dobot)')
+    cameras = []
+    for kind in ('rgb', 'thermal'):
+        driver = getattr(arguments, f'{kind}_camera')
+        if driver:
+            parameters = _overrides([f'{kind}.{s}' for s in
+                                     getattr(arguments, f'{kind}_camera_param') or ()])
+            cameras.append(CameraSpec(kind, driver, parameters.get(kind, {})))
+    return _supervise(arguments, 'rig', lambda: hardware_graph(
+        dobot_port, arguments.servo_port, cameras, arguments.nodes, _overrides(arguments.set)))
+
+
+def _supervise(arguments, graph, describe):
+    """Describe the graph (GraphError: one line), start it, supervise it until it ends."""
+    from helio_control.bringup import GraphError, run_supervised
+    try:
+        specs = describe()
+    except GraphError as error:
+        raise CommandError(str(error)) from None
+    log_dir = arguments.log_dir or tempfile.mkdtemp(prefix=f'helio_{graph}_logs_')
+    return run_supervised(specs, arguments.namespace, log_dir,
+                          stop_timeouts=(arguments.stop_timeout, arguments.stop_timeout),
+                          on_started=_announce(log_dir))
+
+
+def command_preview(arguments):
+    """Run the preview command (helio_control.preview) with the remaining arguments."""
+    from helio_control import preview
+    return preview.main(arguments.preview_arguments)
+
+
+def _run_node_in_process(node_class, parameters, namespace):
+    """Run a node in this process with `parameters` (a parameter file, as for processes)."""
+    from helio_optics.node_kit.processes import ros_arguments, write_parameter_file
+    from helio_optics.node_kit.runner import run_node
+    with tempfile.TemporaryDirectory(prefix='helio_parameters_') as folder:
+        path = write_parameter_file(os.path.join(folder, 'parameters.yaml'), parameters)
+        run_node(node_class, ['helio'] + ros_arguments(path, namespace=namespace))
+
+
+def command_record(arguments):
+    """Record the graph's topics into a bag (until Ctrl-C), or recover a crashed bag."""
+    from helio_control.bag_files import recover_bag
+    if arguments.recover:
+        kept = recover_bag(arguments.recover)
+        print(f'{arguments.recover}: ' + ('complete already' if kept is None else
+                                          f'recovered, {kept} messages kept'))
+        return EXIT_OK
+    if not arguments.out:
+        raise UsageError('record needs --out DIR (or --recover BAG)')
+    from helio_control.recorder import RecorderNode
+    parameters = {'output_dir': os.path.abspath(arguments.out),
+                  'camera_decimation': arguments.camera_decimation,
+                  'use_sim_time': arguments.sim_time, 'chunk_period': arguments.chunk_period}
+    if arguments.topics:
+        parameters['topics'] = arguments.topics
+    _run_node_in_process(RecorderNode, parameters, arguments.namespace)
+    return EXIT_OK
+
+
+def command_replay(arguments):
+    """Play a bag back with /clock."""
+    from helio_control.bag_files import bag_file
+    from helio_control.replay import ReplayerNode
+    bag_file(arguments.bag)               # a clear error for a path that is no bag
+    parameters = {'bag': os.path.abspath(arguments.bag), 'rate': arguments.rate,
+                  'start_delay': arguments.delay}
+    if arguments.exclude:
+        parameters['exclude'] = arguments.exclude
+    if arguments.topics:
+        parameters['topics'] = arguments.topics
+    _run_node_in_process(ReplayerNode, parameters, arguments.namespace)
+    return EXIT_OK
+
+
+def command_report(arguments):
+    """Write the run report of a run directory."""
+    from helio_control.report import make_report
+    report = make_report(arguments.run_dir)
+    print(report.html_path)
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------------------- paint
+class ProgressBar:
+    """One line on a terminal: dots done of total, phase, T_max, N_p, ETA."""
+
+    def __init__(self, stream=None, width=30):
+        """Write to `stream` (default stderr)."""
+        self.stream = stream or sys.stderr
+        self.width = width
+
+    def line(self, feedback):
+        """Return the progress line for a PaintPattern feedback."""
+        total = max(int(feedback.total), 0)
+        done = min(int(feedback.index), total)
+        filled = int(round(self.width * done / total)) if total else 0
+        eta = (f'{feedback.eta / 60:.1f} min' if math.isfinite(feedback.eta) and
+               feedback.eta > 0 else '?')
+        return (f'[{"#" * filled}{"." * (self.width - filled)}] {done}/{total} dots  '
+                f'{feedback.phase:<14} T_max {feedback.t_max:6.1f} degC  N_p {feedback.n_p:3d}'
+                f'  ETA {eta}')
+
+    def __call__(self, feedback_message):
+        """
+        Show one feedback (the action client's feedback callback).
+
+        On a terminal the line is redrawn in place; into a file or pipe a line is written
+        only when the dot or the phase changes, so a log stays readable.
+        """
+        feedback = getattr(feedback_message, 'feedback', feedback_message)
+        if self.stream.isatty():
+            print(self.line(feedback), end='\r', file=self.stream, flush=True)
+            return
+        step = (feedback.index, feedback.phase)
+        if step != getattr(self, '_last_step', None):
+            self._last_step = step
+            print(self.line(feedback), file=self.stream, flush=True)
+
+
+def default_run_dir():
+    """Return runs/<UTC time> under the current directory."""
+    stamp = datetime.datetime.now(datetime.timezone.utc).strftime('%Y%m%dT%H%M%SZ')
+    return os.path.join('runs', stamp)
+
+
+def command_paint(arguments, action_type):
+    """Send the PaintPattern goal; start the simulated graph when no painter answers."""
+    picture = resolve_picture(arguments.picture) if arguments.picture else ''
+    goal = build_goal(action_type.Goal, arguments, picture)
+    if not picture and not list(getattr(goal, 'points', [])):
+        raise UsageError('paint needs a PICTURE or --points')
+    run_dir = os.path.abspath(arguments.out or default_run_dir())
+    os.makedirs(run_dir, exist_ok=True)
+    if hasattr(goal, 'run_dir') and not goal.run_dir:
+        goal.run_dir = run_dir
+    session = PaintSession(arguments, action_type, run_dir)
+    return session.run(goal)
+
+
+class PaintSession:
+    """The client side of one painting: graph, recorder, goal, progress, report."""
+
+    def __init__(self, arguments, action_type, run_dir):
+        """Keep the options; nothing starts yet."""
+        self.arguments = arguments
+        self.action_type = action_type
+        self.run_dir = run_dir
+        self.group = None
+        self.recorder = None
+        self.interrupted = threading.Event()
+
+    def run(self, goal):
+        """Paint; return the exit status."""
+        import rclpy
+        from rclpy.action import ActionClient
+        from helio_optics.node_kit.in_process_graph import InProcessGraph
+        with InProcessGraph('helio_paint', namespace=self.arguments.namespace) as graph:
+            client = ActionClient(graph.helper, self.action_type, 'paint')
+            try:
+                if not client.wait_for_server(timeout_sec=self.arguments.connect_timeout):
+                    if self.arguments.no_start:
+                        raise CommandError(
+                            f'no painter answers on {graph.helper.resolve_topic_name("paint")}'
+                            f' within {self.arguments.connect_timeout:g} s (start one with '
+                            '"helio sim" or "helio rig", or leave out --no-start)')
+                    self._start_graph()
+                    if not client.wait_for_server(timeout_sec=self.arguments.start_timeout):
+                        self._graph_check()
+                        raise CommandError(
+                            f'the simulated graph started but no painter answers on '
+                            f'{graph.helper.resolve_topic_name("paint")} within '
+                            f'{self.arguments.start_timeout:g} s (logs: {self.log_dir})')
+                self._start_recorder()
+                return self._paint(graph, client, goal)
+            finally:
+                self._stop(rclpy)
+
+    @property
+    def log_dir(self):
+        """Return where the started processes log."""
+        return os.path.join(self.run_dir, 'logs')
+
+    def _start_graph(self):
+        from helio_control.bringup import interrupts_deferred, simulated_graph, start_graph
+        print('[helio] no painter is running: starting the simulated graph', file=sys.stderr)
+        overrides = {'sim_world': {'real_time_factor': self.arguments.real_time_factor,
+                                   'output_dir': self.run_dir}}
+        port_dir = tempfile.mkdtemp(prefix='helio_paint_ports_')
+        with interrupts_deferred():     # no node started but not kept for stopping
+            self.group = start_graph(simulated_graph(port_dir, overrides=overrides),
+                                     self.arguments.namespace, self.log_dir)
+
+    def _graph_check(self):
+        from helio_optics.node_kit.processes import NodeProcessError
+        if self.group is not None:
+            try:
+                self.group.check()
+            except NodeProcessError as error:
+                raise CommandError(str(error).splitlines()[0] + f' (logs: {self.log_dir})') \
+                    from None
+
+    def _start_recorder(self):
+        if self.arguments.no_record:
+            return
+        from helio_control.bringup import interrupts_deferred
+        from helio_control.recorder import Recorder
+        self.recorder = Recorder(os.path.join(self.run_dir, 'recording'),
+                                 camera_decimation=self.arguments.camera_decimation,
+                                 namespace=self.arguments.namespace,
+                                 use_sim_time=self.group is not None,
+                                 log_dir=self.log_dir)
+        with interrupts_deferred():
+            self.recorder.process.start()
+        self.recorder.start_wait()
+
+    def _paint(self, graph, client, goal):
+        from action_msgs.msg import GoalStatus
+        handle = graph.send_goal(client, goal, ProgressBar(), self.arguments.connect_timeout)
+        if not handle.accepted:
+            raise CommandError('the painter rejected the goal (see its log)')
+        future = graph.result_of(graph.executor.create_task(handle.get_result_async),
+                                 self.arguments.connect_timeout, 'the result request')
+        finished = threading.Event()
+        future.add_done_callback(lambda _: finished.set())
+        try:
+            while not finished.wait(0.5):
+                self._graph_check()         # a dead node ends the wait with its name
+        except KeyboardInterrupt:
+            print('\n[helio] Ctrl-C: cancelling the goal (the lens retreats)', file=sys.stderr)
+            graph.cancel_goal(handle, 30.0)
+            graph.result_of(future, self.arguments.cancel_timeout, 'the cancelled result')
+            self.interrupted.set()
+            return EXIT_INTERRUPTED
+        response = future.result()
+        result = response.result
+        print(file=sys.stderr)
+        print(f'[helio] {result.message} ({result.dots_burnt} burnt, {result.dots_skipped} '
+              f'skipped, {result.duration:.0f} s)', file=sys.stderr)
+        return EXIT_OK if response.status == GoalStatus.STATUS_SUCCEEDED and \
+            result.success else EXIT_FAILED
+
+    def _stop(self, rclpy):
+        if self.recorder is not None:
+            self.recorder.stop()
+        if self.group is not None:
+            self.group.stop()
+        if os.path.exists(os.path.join(self.run_dir, 'journal.jsonl')):
+            from helio_control.report import make_report
+            report = make_report(self.run_dir)
+            print(f'[helio] report: {report.html_path}')
+
+
+# ---------------------------------------------------------------------------- parser
+class UsageError(Exception):
+    """A usage problem found after parsing (exit status 2)."""
+
+
+def build_parser(action_type=None):
+    """Return the argument parser of ``helio`` and its sub-commands."""
+    parser = argparse.ArgumentParser(prog='helio', description='Paint with the sun: run the '
+                                     'graph, paint, record, replay and report.')
+    commands = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
+
+    def graph_options(command):
+        command.add_argument('--namespace', default='', help='namespace of every node')
+        command.add_argument('--nodes', nargs='+', help='start only these nodes')
+        command.add_argument('--set', action='append', metavar='NODE.PARAM=VALUE',
+                             help='override a node parameter (YAML value); repeatable')
+        command.add_argument('--log-dir', help='node logs (default: a temporary folder)')
+        command.add_argument('--stop-timeout', type=float, default=10.0,
+                             help='seconds for each step SIGINT, SIGTERM before SIGKILL')
+
+    sim = commands.add_parser('sim', help='start the simulated graph (Ctrl-C stops it)',
+                              description='Start every node of the simulated rig as its own '
+                              'process and supervise them.')
+    graph_options(sim)
+    sim.add_argument('--real-time-factor', type=_finite_float, default=1.0,
+                     help='simulated seconds per wall second (0: as fast as possible)')
+    sim.add_argument('--out', help='sim_world writes canvas.png and dots.csv here at the end')
+    sim.add_argument('--port-dir', help="where the emulated devices' ports are made")
+    sim.set_defaults(handler=command_sim)
+
+    rig = commands.add_parser('rig', help='start the hardware graph (Ctrl-C stops it)',
+                              description='Start the graph on the real rig. The camera '
+                              'drivers must publish rgb/image_raw + rgb/camera_info and '
+                              'thermal/image_raw (16UC1 centikelvin) + thermal/camera_info.')
+    graph_options(rig)
+    rig.add_argument('--dobot-port', required=True,
+                     help='serial port of the Dobot, or "auto" (found by its USB ids)')
+    rig.add_argument('--servo-port', required=True, help='serial port of the servo controller')
+    for kind in ('rgb', 'thermal'):
+        rig.add_argument(f'--{kind}-camera', metavar='PKG/EXE',
+                         help=f'{kind} camera driver to start (image_raw and camera_info '
+                              f'remapped into {kind}/)')
+        rig.add_argument(f'--{kind}-camera-param', action='append', metavar='NAME=VALUE',
+                         help=f'parameter of the {kind} camera driver; repeatable')
+    rig.set_defaults(handler=command_rig)
+
+    preview = commands.add_parser('preview', add_help=False, help='plan a picture: '
+                                  'preview.png and plan.json (no graph needed)',
+                                  description='helio preview PICTURE --out DIR [options]; '
+                                  '"helio preview --help" lists the options.')
+    preview.add_argument('preview_arguments', nargs=argparse.REMAINDER)
+    preview.set_defaults(handler=command_preview)
+
+    paint = commands.add_parser('paint', help='paint a picture through the paint action',
+                                description='Send the PaintPattern goal to a running graph, '
+                                'or start the simulated graph when none answers; record the '
+                                'run and write its report. Ctrl-C cancels the goal.')
+    paint.add_argument('picture', nargs='?', default='',
+                       help='picture file or sample:text, sample:logo, sample:portrait')
+    paint.add_argument('--out', help='run directory (default: runs/<UTC time>)')
+    paint.add_argument('--namespace', default='', help='namespace of the graph')
+    paint.add_argument('--connect-timeout', type=float, default=5.0,
+                       help='seconds to wait for a running painter')
+    paint.add_argument('--start-timeout', type=float, default=60.0,
+                       help='seconds for a started graph to offer the paint action')
+    paint.add_argument('--cancel-timeout', type=float, default=60.0,
+                       help='seconds to wait for the result after Ctrl-C')
+    paint.add_argument('--no-start', action='store_true',
+                       help='fail instead of starting the simulated graph')
+    paint.add_argument('--no-record', action='store_true', help='do not record the run')
+    paint.add_argument('--camera-decimation', type=_positive_int, default=5,
+                       help='record every N-th camera message')
+    paint.add_argument('--real-time-factor', type=_finite_float, default=0.0,
+                       help='of a started simulated graph (0: as fast as possible)')
+    if action_type is not None:
+        add_goal_options(paint, action_type.Goal)
+    paint.set_defaults(handler=lambda arguments: command_paint(arguments, action_type))
+
+    record = commands.add_parser('record', help="record the graph's topics into a bag",
+                                 description='Record every topic (camera topics decimated) '
+                                 'into a rosbag2/MCAP bag until Ctrl-C.')
+    record.add_argument('--out', help='bag directory to create')
+    record.add_argument('--recover', metavar='BAG', help='complete a bag a crash left open')
+    record.add_argument('--topics', nargs='+', help='only these topics')
+    record.add_argument('--camera-decimation', type=_positive_int, default=5,
+                        help='keep every N-th camera message')
+    record.add_argument('--chunk-period', type=float, default=2.0,
+                        help='longest time a chunk stays open (what a crash loses) [s]')
+    record.add_argument('--sim-time', action='store_true',
+                        help='stamp messages with /clock (simulated graphs)')
+    record.add_argument('--namespace', default='', help='namespace to resolve topics in')
+    record.set_defaults(handler=command_record)
+
+    replay = commands.add_parser('replay', help='play a bag back with /clock',
+                                 description='Publish the messages of a bag with /clock at a '
+                                 'rate; ends when the bag is played.')
+    replay.add_argument('bag', help='bag directory')
+    replay.add_argument('--rate', type=_finite_float, default=1.0,
+                        help='bag seconds per wall second')
+    replay.add_argument('--delay', type=_finite_float, default=0.5, metavar='SECONDS',
+                        help='wall time to let subscribers discover the publishers before '
+                        'playing (as ros2 bag play --delay; default 0.5)')
+    replay.add_argument('--exclude', nargs='+', metavar='TOPIC', help='topics not played')
+    replay.add_argument('--topics', nargs='+', help='only these topics')
+    replay.add_argument('--namespace', default='', help='namespace to play into')
+    replay.set_defaults(handler=command_replay)
+
+    report = commands.add_parser('report', help='write the report of a run directory',
+                                 description='Write summary.json, plots and report.html '
+                                 'into RUN_DIR.')
+    report.add_argument('run_dir', help='run directory (runs/<UTC time>)')
+    report.set_defaults(handler=command_report)
+    return parser
+
+
+def main(args=None):
+    """Run ``helio``; return the exit status."""
+    args = sys.argv[1:] if args is None else list(args)
+    try:
+        from helio_msgs.action import PaintPattern
+    except ImportError:
+        PaintPattern = None     # noqa: N806 - paint then explains
+    parser = build_parser(PaintPattern)
+    arguments = parser.parse_args(args)       # exits 2 on bad usage
+    try:
+        if arguments.command == 'paint' and PaintPattern is None:
+            raise CommandError('helio_msgs is not installed (is the workspace sourced?)')
+        return arguments.handler(arguments)
+    except UsageError as error:
+        parser.print_usage(sys.stderr)
+        print(f'helio {arguments.command}: error: {error}', file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print(f'\nhelio {arguments.command}: interrupted', file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except (CommandError, OSError, ValueError, RuntimeError, AssertionError) as error:
+        message = ' '.join(str(error).split()) or type(error).__name__
+        print(f'helio {arguments.command}: error: {message}', file=sys.stderr)
+        return EXIT_FAILED
+
+
+if __name__ == '__main__':
+    sys.exit(main())

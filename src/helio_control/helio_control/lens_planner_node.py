@@ -1,0 +1,758 @@
+"""
+Node lens_planner: place the lens so the focus lands on a point, and calibrate the rig.
+
+Actions (one goal at a time across all four; a second is aborted with "busy"):
+
+- ``focus`` (helio_msgs/FocusLens, paper Eqs 14-15): world target + d_lp -> the lens pose
+  from the sun estimate (``sun/estimate``, kept current by Eq 18), corrected so the spot's
+  power centre (not only the lens axis) lands on the target (``FocusTargeting``) -> the five
+  joints by the rig's inverse kinematics -> ``move_arm`` and ``move_wrist`` together, in legs
+  that keep the focus off the wood while it travels (``lens_moves``: retreat, travel at the
+  travel distance, approach). The result holds the pose reached (forward kinematics of the
+  joints the drivers report) and its distance from the commanded one.
+- ``calibrate_world`` (CalibrateWorld, Sec. II-B): poses from which the RGB camera sees the
+  marker; each marker pose with the kinematic camera pose gives T_robot_world
+  (``world_calibration``); published on ``calibration/world_pose`` (transient local), saved,
+  and used from then on by this node (and every node that follows the topic).
+- ``sweep_sun`` (SweepSun, Sec. V-B): acquire the spot when there is no estimate (the
+  ephemeris' elevation, a ring of azimuth guesses), sweep poses that change the geometry
+  (``sun_sweep``), call ``estimate_sun``.
+- ``calibrate_focus`` (CalibrateFocus, Sec. V-A): lens aligned with the estimated sun, d_lp
+  swept, A_c from the spot detector, fit (``helio_optics.focal_calibration``); the heating
+  distance published on ``calibration/focus`` (transient local) and saved; the lens model's
+  focal length is scaled so its focus falls where the sweep found it.
+
+Every goal is checked first: no sun estimate, a non-finite or unreachable target (which
+joint, by how much), no joint states: the goal is aborted at once with the reason. A cancel
+cancels the driver goals (the drivers stop the arm and hold the servos) and ends the goal.
+
+Execute callbacks are coroutines that await the driver actions, the estimator service, the
+spot stream and node-clock timers; nothing blocks, and the node runs in a plain
+``rclpy.spin`` (one thread).
+"""
+
+import datetime
+import math
+import os
+import traceback
+
+from geometry_msgs.msg import PoseStamped
+from helio_control import lens_moves, sun_sweep
+from helio_control.world_calibration import estimate_world_in_robot
+from helio_msgs.action import (CalibrateFocus, CalibrateWorld, FocusLens, MoveArm, MoveWrist,
+                               SweepSun)
+from helio_msgs.msg import FocalCalibration, LensPose, SpotObservation, SunEstimate
+from helio_msgs.srv import EstimateSun
+from helio_optics.ephemeris import sun_position
+from helio_optics.focal_calibration import calibrate_focus
+from helio_optics.focus_targeting import FocusTargeting
+from helio_optics.geometry import transform_points
+from helio_optics.node_kit.awaitables import discovered, FirstOf, sleep, within
+from helio_optics.node_kit.conversions import array_to_point, camera_from_info
+from helio_optics.node_kit.conversions import matrix_to_pose, point_to_array, pose_to_matrix
+from helio_optics.node_kit.conversions import stamp_to_seconds
+from helio_optics.node_kit.deployment import declare_lens, declare_rig, declare_site
+from helio_optics.node_kit.deployment import follow_world_calibration
+from helio_optics.node_kit.joint_states import JointStateBuffer
+from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.runner import run_node
+from helio_optics.spot import spot_area_at
+import numpy as np
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
+from rclpy.qos import ReliabilityPolicy
+from sensor_msgs.msg import CameraInfo, JointState
+import yaml
+
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+RELIABLE = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+
+
+class GoalFailed(Exception):
+    """A procedure cannot go on; the message is the goal's result message."""
+
+
+class GoalCanceled(Exception):
+    """The goal was canceled while it ran."""
+
+
+class SpotWaiter:
+    """Collects the spot observations stamped after `after` until `count` arrived."""
+
+    def __init__(self, after, count, accept):
+        self.after, self.count, self.accept = after, count, accept
+        self.messages = []
+        self.refused = {}              # reason -> count, for the log
+        self.future = FirstOf()
+
+    def offer(self, message):
+        """Take a spot observation; complete the future when enough were taken."""
+        if self.future.done() or stamp_to_seconds(message.header.stamp) <= self.after:
+            return
+        if self.accept(message):
+            self.messages.append(message)
+        else:
+            reason = message.reason or 'not accepted'
+            self.refused[reason] = self.refused.get(reason, 0) + 1
+        if len(self.messages) >= self.count:
+            self.future.offer(self.messages)
+
+
+class LensPlannerNode(Node):
+    """See the module docstring."""
+
+    def __init__(self, **kwargs):
+        """Declare parameters, load the rig and lens models, open the interfaces."""
+        super().__init__('lens_planner', **kwargs)
+        self.rig, rig_file = declare_rig(self)
+        self.lens, lens_file = declare_lens(self)
+        self.site, _ = declare_site(self)
+        self.heating_distance = declare(
+            self, 'heating_distance', 0.082,
+            'd_lp at which a dot is heated until the focal calibration says otherwise '
+            '(paper: 8.2 cm) [m].', 0.02, 0.3)
+        self.travel_distance = declare(
+            self, 'travel_distance', 0.112,
+            "d_lp at which the lens travels between points (heating distance + the paper's "
+            'retreat of 3 cm), so the focus never sweeps the wood [m].', 0.02, 0.4)
+        self.safe_margin = declare(
+            self, 'safe_margin', 0.015,
+            'The focus moves sideways only this far or farther from the heating distance '
+            '(where the retreat distance is out of reach, such a distance is taken) [m].',
+            0.002, 0.1)
+        self.same_point = declare(self, 'same_point', 0.001,
+                                  'Moves that shift the focus less than this on the panel go '
+                                  'straight along the sun ray [m].', 0.0, 0.05)
+        self.server_timeout = declare(
+            self, 'server_timeout', 30.0,
+            'Wait at most this long for the driver actions and estimate_sun to be discovered '
+            '(wall clock) [s].', 0.1, 600.0)
+        self.joint_state_max_age = declare(
+            self, 'joint_state_max_age', 5.0,
+            'The present joints must be younger than this (node clock) [s].', 0.01, 60.0)
+        self.joint_state_tolerance = declare(
+            self, 'joint_state_tolerance', 0.3,
+            'Largest gap between an image stamp and the joint state used with it (node '
+            'clock) [s].', 0.001, 10.0)
+        self.focus_rays = declare(self, 'focus_rays', 3000,
+                                  'Rays per spectral band of the focus model [-].', 100, 100000)
+        self.marker_side = declare(self, 'marker_side', 0.04,
+                                   "Side of the ArUco marker's black square [m].", 0.001, 1.0)
+        self.view_margin = declare(self, 'view_margin', 30.0,
+                                   'Marker and spot must lie this far inside the image '
+                                   '[px].', 0.0, 500.0)
+        self.observe_frames = declare(self, 'observe_frames', 4,
+                                      'Spot observations collected per pose [-].', 1, 100)
+        self.observe_timeout = declare(self, 'observe_timeout', 10.0,
+                                       'Longest wait for them (node clock) [s].', 0.1, 600.0)
+        self.settle_time = declare(self, 'settle_time', 0.3,
+                                   'Wait after a move before observing (node clock) [s].',
+                                   0.0, 10.0)
+        self.view_points = sun_sweep.view_points(
+            declare(self, 'panel_extent', [-0.04, 0.16, -0.04, 0.16],
+                    'The wood panel around the marker: x_min, x_max, y_min, y_max, world '
+                    'frame [m]; the calibrations aim at points of it.'),
+            declare(self, 'view_spacing', 0.02,
+                    'Spacing of the grid of panel points the calibrations aim near [m].',
+                    0.002, 0.1),
+            declare(self, 'marker_clearance', 0.05,
+                    "Aim no closer than this to the marker's centre (the spot must miss the "
+                    'marker) [m].', 0.0, 0.5))
+        self.world_poses = declare(self, 'world_calibration.poses', 8,
+                                   'Arm poses of the robot-world calibration [-].', 3, 100)
+        self.world_distance = declare(self, 'world_calibration.distance', 0.11,
+                                      'Lens height over the panel while the marker is '
+                                      'observed (the focus spread out) [m].', 0.05, 0.4)
+        self.sweep_count = declare(self, 'sweep.poses', 6, 'Poses of the sun sweep [-].', 2,
+                                   100)
+        self.sweep_tilts = declare(self, 'sweep.tilts_deg', [0.0, 5.0, 10.0],
+                                   'Tilts of the lens axis off the sun in the sweep [deg].')
+        self.sweep_distances = declare(
+            self, 'sweep.distances', [0.076, 0.082, 0.088],
+            'Lens-panel distances of the sweep, near the focus where the spot model holds '
+            '[m].')
+        self.acquire_step = declare(self, 'sweep.acquire_azimuth_step_deg', 30.0,
+                                    'Azimuth step of the search for the spot [deg].', 1.0, 180.0)
+        self.focus_sweep = (declare(self, 'focal_calibration.d_min', 0.064,
+                                    'First d_lp of the focal sweep (paper 6.4 cm) [m].',
+                                    0.02, 0.3),
+                            declare(self, 'focal_calibration.d_max', 0.098,
+                                    'Last d_lp of the focal sweep (paper 9.8 cm) [m].',
+                                    0.02, 0.3),
+                            declare(self, 'focal_calibration.step', 0.001,
+                                    'Step of the focal sweep (paper 0.1 cm) [m].', 1e-4, 0.05))
+        calibration_dir = declare(self, 'calibration_dir', '',
+                                  'Where calibrations are saved (empty: ~/.helio/'
+                                  'calibration).')
+        self.calibration_dir = os.path.expanduser(calibration_dir or '~/.helio/calibration')
+
+        self.targeting = FocusTargeting(self.rig, self.lens, rays=self.focus_rays)
+        self.world_calibrated = False      # T_robot_world measured: no marker needed
+        follow_world_calibration(self, self.rig, self._calibrated)
+        self.joints = JointStateBuffer()
+        self.sun = None                      # latest trustworthy SunEstimate
+        self.camera = None
+        self._camera_seen = FirstOf()        # done at the first rgb/camera_info
+        self._busy = False
+        self._driver_goals = []              # handles of the driver goals in flight
+        self._spot_waiters = []
+        self.create_subscription(JointState, 'joint_states', self._on_joint_state, 50)
+        self.create_subscription(SunEstimate, 'sun/estimate', self._on_sun, LATCHED)
+        self.create_subscription(SpotObservation, 'spot', self._on_spot, RELIABLE)
+        self.create_subscription(CameraInfo, 'rgb/camera_info', self._on_camera_info,
+                                 qos_profile_sensor_data)
+        self.world_publisher = self.create_publisher(PoseStamped, 'calibration/world_pose',
+                                                     LATCHED)
+        self.focus_publisher = self.create_publisher(FocalCalibration, 'calibration/focus',
+                                                     LATCHED)
+        self.arm = ActionClient(self, MoveArm, 'move_arm')
+        self.wrist = ActionClient(self, MoveWrist, 'move_wrist')
+        self.estimator = self.create_client(EstimateSun, 'estimate_sun')
+        for action_type, name, execute in (
+                (FocusLens, 'focus', self._execute_focus),
+                (CalibrateWorld, 'calibrate_world', self._execute_calibrate_world),
+                (SweepSun, 'sweep_sun', self._execute_sweep_sun),
+                (CalibrateFocus, 'calibrate_focus', self._execute_calibrate_focus)):
+            ActionServer(self, action_type, name, self._guarded(action_type, execute),
+                         goal_callback=lambda goal: GoalResponse.ACCEPT,
+                         cancel_callback=self._on_cancel)
+        self.get_logger().info(f'lens_planner: rig from {rig_file}, lens from {lens_file}; '
+                               f'heating {self.heating_distance * 100:.1f} cm, travel '
+                               f'{self.travel_distance * 100:.1f} cm')
+
+    # ---- inputs -----------------------------------------------------------------------------
+
+    def _calibrated(self, _rig):
+        self.world_calibrated = True
+
+    def _on_joint_state(self, message):
+        problem = self.joints.add_message(message)
+        if problem:
+            self.get_logger().warning(problem, throttle_duration_sec=5.0)
+
+    def _on_sun(self, message):
+        if message.converged:
+            self.sun = message
+
+    def _on_spot(self, message):
+        for waiter in list(self._spot_waiters):
+            waiter.offer(message)
+
+    def _on_camera_info(self, message):
+        try:
+            self.camera = camera_from_info(message)
+            self._camera_seen.offer(True)
+        except ValueError as error:
+            self.get_logger().warning(f'rgb/camera_info ignored: {error}',
+                                      throttle_duration_sec=10.0)
+
+    def _on_cancel(self, _goal_handle):
+        for handle in list(self._driver_goals):
+            handle.cancel_goal_async()     # the drivers stop the arm and hold the servos
+        return CancelResponse.ACCEPT
+
+    # ---- shared pieces ----------------------------------------------------------------------
+
+    def _now(self):
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _guarded(self, action_type, execute):
+        """Wrap a procedure: one goal at a time, failures and cancels become results."""
+        async def run(goal_handle):
+            result = action_type.Result()
+            if self._busy:
+                result.success, result.message = False, 'busy: another lens_planner goal runs'
+                goal_handle.abort()
+                return result
+            self._busy = True
+            try:
+                await execute(goal_handle, result)
+                result.success = True
+                goal_handle.succeed()
+            except GoalCanceled:
+                result.success, result.message = False, 'canceled; the devices were stopped'
+                goal_handle.canceled()
+            except GoalFailed as failure:
+                result.success, result.message = False, str(failure)
+                goal_handle.abort()
+            except Exception as error:      # a bug: end the goal with what happened
+                result.success = False
+                result.message = f'internal error: {type(error).__name__}: {error}'
+                self.get_logger().error(traceback.format_exc())
+                goal_handle.abort()
+            finally:
+                self._busy = False
+            if result.success:
+                self.get_logger().info(f'{action_type.__name__}: {result.message}')
+            else:
+                self.get_logger().warning(f'{action_type.__name__}: {result.message}')
+            return result
+        return run
+
+    def _check_cancel(self, goal_handle):
+        if goal_handle.is_cancel_requested:
+            raise GoalCanceled()
+
+    def _sun_ray(self):
+        if self.sun is None:
+            raise GoalFailed("no sun estimate yet: run sweep_sun (or sun_estimator's "
+                             'estimate_sun) first')
+        return point_to_array(self.sun.direction)
+
+    def _present_joints(self):
+        lookup = self.joints.latest(self._now(), self.joint_state_max_age)
+        if not lookup:
+            raise GoalFailed(f'the present joints are unknown: {lookup.reason}')
+        return lookup.positions
+
+    async def _discovered(self, ready, what):
+        """Wait until `ready()` (a server discovered), at most server_timeout of wall time."""
+        try:
+            await discovered(self, ready, self.server_timeout, what)
+        except TimeoutError as error:
+            raise GoalFailed(str(error)) from None
+
+    async def _move(self, goal_handle, x):
+        """Move arm and wrist to joints x together; return the joints the drivers reached."""
+        self._check_cancel(goal_handle)
+        await self._discovered(lambda: self.arm.server_is_ready()
+                               and self.wrist.server_is_ready(),
+                               'move_arm or move_wrist (are dobot_driver and servo_driver '
+                               'running and connected?)')
+        arm_goal = MoveArm.Goal(mode=MoveArm.Goal.MOVJ_ANGLE,
+                                target=[float(v) for v in x[:3]] + [0.0])
+        wrist_goal = MoveWrist.Goal(yaw=float(x[3]), pitch=float(x[4]))
+        handles = []
+        for client, goal, name in ((self.arm, arm_goal, 'move_arm'),
+                                   (self.wrist, wrist_goal, 'move_wrist')):
+            handle = await client.send_goal_async(goal)
+            if not handle.accepted:
+                for other in handles:
+                    other.cancel_goal_async()
+                raise GoalFailed(f'{name} refused the goal (another move running?)')
+            handles.append(handle)
+            self._driver_goals.append(handle)
+        try:
+            arm_result = (await handles[0].get_result_async()).result
+            wrist_result = (await handles[1].get_result_async()).result
+        finally:
+            for handle in handles:
+                self._driver_goals.remove(handle)
+        self._check_cancel(goal_handle)
+        for result, name in ((arm_result, 'move_arm'), (wrist_result, 'move_wrist')):
+            if not result.success:
+                raise GoalFailed(f'{name} failed: {result.message}')
+        return np.array([*arm_result.achieved_joints[:3], wrist_result.achieved_yaw,
+                         wrist_result.achieved_pitch])
+
+    async def _observe(self, goal_handle, count, accept=lambda message: message.valid):
+        """Return `count` spot observations imaged after now (after the settle time)."""
+        await sleep(self, self.settle_time)
+        waiter = SpotWaiter(self._now(), count, accept)
+        self._spot_waiters.append(waiter)
+        timer = self.create_timer(self.observe_timeout,
+                                  lambda: waiter.future.offer(list(waiter.messages)))
+        try:
+            messages = await waiter.future
+        finally:
+            self._spot_waiters.remove(waiter)
+            self.destroy_timer(timer)
+        if len(messages) < count:
+            self.get_logger().warning(
+                f'{len(messages)} of {count} spot observations accepted in '
+                f'{self.observe_timeout:g} s; refused: {waiter.refused or "none arrived"}')
+        self._check_cancel(goal_handle)
+        return messages
+
+    def _lens_pose(self, x, d_lp):
+        pose = self.rig.forward(x)
+        message = LensPose()
+        message.header.stamp = self.get_clock().now().to_msg()
+        message.header.frame_id = 'robot'
+        message.position = array_to_point(pose.T_robot_lens[:3, 3])
+        message.yaw, message.pitch, message.d_lp = pose.yaw, pose.pitch, float(d_lp)
+        message.joints = [float(v) for v in x]
+        return message
+
+    # ---- focus ------------------------------------------------------------------------------
+
+    async def _execute_focus(self, goal_handle, result):
+        goal = goal_handle.request
+        frame = goal.target.header.frame_id or 'world'
+        if frame != 'world':
+            raise GoalFailed(f"target frame '{frame}': give the target in 'world' (the "
+                             'marker frame, z = 0 on the panel)')
+        target = point_to_array(goal.target.point)
+        if not np.all(np.isfinite(target)):
+            raise GoalFailed(f'the target {target.tolist()} is not finite')
+        if abs(target[2]) > 1e-6:
+            raise GoalFailed(f'the target lies {target[2] * 1000:.1f} mm off the panel (z must '
+                             'be 0 in the world frame)')
+        d_lp = goal.d_lp if goal.d_lp != 0.0 else self.heating_distance
+        if not (math.isfinite(d_lp) and d_lp > 0.0):
+            raise GoalFailed(f'd_lp must be a finite distance > 0 m, got {goal.d_lp}')
+        sun = self._sun_ray()
+        x_now = self._present_joints()
+        T_robot_world = self.rig.parameters.T_robot_world
+        try:
+            legs = lens_moves.plan_focus_moves(
+                self.targeting, x_now, target, d_lp, sun, T_robot_world, self.heating_distance,
+                (self.travel_distance, self.heating_distance + self.safe_margin,
+                 self.heating_distance - self.safe_margin), self.safe_margin, self.same_point)
+        except (lens_moves.MovePlanningError, ValueError) as error:
+            raise GoalFailed(str(error)) from None
+        solution = self.targeting.aim(target, sun, d_lp, T_robot_world)
+        feedback = FocusLens.Feedback()
+        feedback.commanded = self._lens_pose(legs[-1].x, d_lp)
+        reached = x_now
+        for leg in legs:
+            feedback.joints = [float(v) for v in reached]
+            feedback.distance_remaining = float(np.linalg.norm(
+                self.rig.forward(legs[-1].x).T_robot_lens[:3, 3]
+                - self.rig.forward(reached).T_robot_lens[:3, 3]))
+            goal_handle.publish_feedback(feedback)
+            reached = await self._move(goal_handle, leg.x)
+        commanded = self.rig.forward(legs[-1].x).T_robot_lens[:3, 3]
+        achieved = self.rig.forward(reached).T_robot_lens[:3, 3]
+        result.achieved = self._lens_pose(reached, d_lp)
+        result.position_error = float(np.linalg.norm(achieved - commanded))
+        correction = np.hypot(*solution.correction[:2])
+        result.message = (f'focused on ({target[0] * 100:.2f}, {target[1] * 100:.2f}) cm at '
+                          f'd_lp {d_lp * 100:.2f} cm in {len(legs)} leg(s) '
+                          f'({", ".join(leg.name for leg in legs)}); aim corrected by '
+                          f'{correction * 1e3:.3f} mm; lens within '
+                          f'{result.position_error * 1e3:.3f} mm of the command')
+
+    # ---- robot-world calibration --------------------------------------------------------
+
+    async def _need_camera(self):
+        if self.camera is None and not await within(self, self._camera_seen,
+                                                    self.observe_timeout):
+            raise GoalFailed(f'no rgb/camera_info within {self.observe_timeout:g} s: is the '
+                             'RGB camera running?')
+        return self.camera
+
+    async def _execute_calibrate_world(self, goal_handle, result):
+        camera = await self._need_camera()
+        total = goal_handle.request.poses or self.world_poses
+        poses = self._marker_poses(camera, total)
+        if len(poses) < 3:
+            raise GoalFailed(f'only {len(poses)} poses show the whole marker to the camera '
+                             'according to the rig file: check world_in_robot in the rig file '
+                             'and the panel_extent parameter')
+        feedback = CalibrateWorld.Feedback(total=len(poses))
+        robot_rgb, world_rgb = [], []
+        for index, x in enumerate(poses):
+            feedback.index, feedback.phase = index, 'moving'
+            goal_handle.publish_feedback(feedback)
+            await self._move(goal_handle, x)
+            feedback.phase = 'observing'
+            goal_handle.publish_feedback(feedback)
+            seen = await self._observe(goal_handle, self.observe_frames,
+                                       accept=_has_marker_pose)
+            if not seen:
+                self.get_logger().warning(f'pose {index}: no marker pose seen')
+                continue
+            for message in seen:     # every frame's marker pose: their noise averages out
+                # the joints when the marker's image was taken (the detector reuses a pose
+                # while the joints stay within its tolerance), not those the move reported
+                # on arrival: a servo arrives within 1 us (about 0.1 deg, i.e. 0.25 mm on a
+                # marker 15 cm away) and settles after
+                taken = stamp_to_seconds(message.header.stamp) - message.marker_pose_age
+                lookup = self.joints.at(taken, self.joint_state_tolerance)
+                if not lookup:
+                    self.get_logger().warning(f'pose {index}: a marker pose skipped: '
+                                              f'{lookup.reason}')
+                    continue
+                robot_rgb.append(self.rig.forward(lookup.positions).T_robot_rgb)
+                world_rgb.append(pose_to_matrix(message.camera_pose))
+            feedback.poses_used = len(robot_rgb)
+            goal_handle.publish_feedback(feedback)
+        try:
+            estimate = estimate_world_in_robot(robot_rgb, world_rgb)
+        except ValueError as error:
+            raise GoalFailed(f'robot-world calibration failed: {error}') from None
+        before = self.rig.parameters
+        result.world_in_robot = matrix_to_pose(estimate.T_robot_world)
+        result.world_yaw = estimate.world_yaw
+        result.residual_position = estimate.residual_position
+        result.residual_angle = estimate.residual_angle
+        result.tilt = estimate.tilt
+        result.poses_used = estimate.used
+        result.shift_from_rig_file = float(np.linalg.norm(
+            estimate.world_in_robot - np.asarray(before.world_in_robot)))
+        result.turn_from_rig_file = float(math.remainder(estimate.world_yaw - before.world_yaw,
+                                                         2.0 * math.pi))
+        if goal_handle.request.apply:
+            self.rig.set_world(estimate.world_in_robot, estimate.world_yaw)
+            self.world_calibrated = True
+            message = PoseStamped()
+            message.header.stamp = self.get_clock().now().to_msg()
+            message.header.frame_id = 'robot'
+            message.pose = result.world_in_robot
+            self.world_publisher.publish(message)
+            result.saved_to = self._save('robot_world.yaml', {'rig': {
+                'world_in_robot': [float(v) for v in estimate.world_in_robot],
+                'world_yaw': float(estimate.world_yaw)}})
+        result.message = (
+            f'T_robot_world from {estimate.used} poses ({len(estimate.rejected)} left out): '
+            f'marker at {np.round(estimate.world_in_robot * 1000, 2).tolist()} mm, yaw '
+            f'{math.degrees(estimate.world_yaw):.3f} deg; spread '
+            f'{estimate.residual_position * 1000:.2f} mm, '
+            f'{math.degrees(estimate.residual_angle):.3f} deg; tilt '
+            f'{math.degrees(estimate.tilt):.2f} deg; moved '
+            f'{result.shift_from_rig_file * 1000:.2f} mm and '
+            f'{math.degrees(result.turn_from_rig_file):.3f} deg from the rig file'
+            + ('' if goal_handle.request.apply else ' (not applied)'))
+
+    def _marker_poses(self, camera, count):
+        """Poses high over the canvas from which the camera sees the marker (rig file)."""
+        T_robot_world = self.rig.parameters.T_robot_world
+        candidates = []
+        corners = sun_sweep.marker_corners(self.marker_side)
+        T_world_robot = np.linalg.inv(T_robot_world)
+        for px, py in self.view_points:
+            for tilt in (0.0, 15.0, 30.0):
+                for azimuth in range(0, 360, 45):
+                    axis = sun_sweep.tilted_axis(np.array([0.0, 0.0, -1.0]),
+                                                 math.radians(tilt), math.radians(azimuth))
+                    centre = transform_points(T_robot_world, [px, py, 0.0]) \
+                        + self.world_distance * axis
+                    yaw, pitch = self.rig.yaw_pitch_for_axis(axis, math.atan2(centre[1],
+                                                                              centre[0]))
+                    try:
+                        x = self.rig.inverse(centre, yaw, pitch)
+                    except ValueError:
+                        continue
+                    T_world_rgb = T_world_robot @ self.rig.forward(x).T_robot_rgb
+                    if sun_sweep.in_view(camera, T_world_rgb, corners, self.view_margin):
+                        candidates.append((_obliquity(T_world_rgb), x))
+        # The marker's depth is measured worst at a slant (up to 1.5 mm at 15 cm seen 40 deg
+        # off its normal, against 0.05 mm square on): keep the squarest views, spread.
+        candidates.sort(key=lambda candidate: candidate[0])
+        squarest = [x for _, x in candidates[:3 * count]]
+        return sun_sweep._spread(squarest)[:count]
+
+    def _save(self, name, tree):
+        os.makedirs(self.calibration_dir, exist_ok=True)
+        path = os.path.join(self.calibration_dir, name)
+        with open(path, 'w') as stream:
+            stream.write(f'# written by lens_planner at node time {self._now():.3f} s\n')
+            yaml.safe_dump({'/**': {'ros__parameters': tree}}, stream,
+                           default_flow_style=False)
+        return path
+
+    # ---- sun sweep -------------------------------------------------------------------------
+
+    async def _estimate(self, method, observations=0):
+        """Call estimate_sun on the last `observations` spots (0: all the estimator keeps)."""
+        await self._discovered(self.estimator.service_is_ready,
+                               'estimate_sun (is sun_estimator running?)')
+        return await self.estimator.call_async(EstimateSun.Request(
+            method=method, max_observations=int(observations)))
+
+    async def _execute_sweep_sun(self, goal_handle, result):
+        request = goal_handle.request
+        camera = await self._need_camera()
+        T_robot_world = self.rig.parameters.T_robot_world
+        feedback = SweepSun.Feedback()
+        observations = 0
+        sun = None if self.sun is None else point_to_array(self.sun.direction)
+        if sun is None:
+            elevation = sun_position(self.site, _utc(self._now())).elevation
+            if elevation <= math.radians(5.0):
+                raise GoalFailed(f'the sun stands {math.degrees(elevation):.1f} deg above the '
+                                 'horizon at this site and time: too low to paint')
+            candidates = sun_sweep.acquisition_poses(
+                self.rig, T_robot_world, elevation, camera, self.marker_side,
+                self.view_points, math.radians(self.acquire_step),
+                (self.heating_distance - 0.016, self.heating_distance - 0.022,
+                 self.heating_distance + 0.03), margin=self.view_margin,
+                need_marker=not self.world_calibrated)
+            if not candidates:
+                raise GoalFailed('no pose to look for the spot: the view points are out of '
+                                 'reach or out of the camera view for this sun elevation')
+            feedback.phase, feedback.total = 'acquiring', len(candidates)
+            for index, (azimuth, x) in enumerate(candidates):
+                feedback.index = index
+                goal_handle.publish_feedback(feedback)
+                await self._move(goal_handle, x)
+                seen = await self._observe(goal_handle, self.observe_frames)
+                observations += len(seen)
+                feedback.observations = observations
+                if seen:
+                    # a coarse sun is enough to choose the sweep: one pose's estimate may be
+                    # ambiguous (a twin sun), which the tilted sweep then settles
+                    response = await self._estimate(request.method, len(seen))
+                    if response.estimate.converged:
+                        sun = point_to_array(response.estimate.direction)
+                        self.get_logger().info(
+                            f'spot found with the azimuth guess {math.degrees(azimuth):.0f} '
+                            f'deg: {response.message}')
+                        break
+            if sun is None:
+                raise GoalFailed(f'the spot was not found at any of {len(candidates)} azimuth '
+                                 'guesses (clouds? the camera? the marker?)')
+        poses = sun_sweep.sweep_poses(self.rig, T_robot_world, sun, camera, self.marker_side,
+                                      self.view_points, request.poses or self.sweep_count,
+                                      tuple(self.sweep_tilts),
+                                      tuple(self.sweep_distances), self.view_margin,
+                                      need_marker=not self.world_calibrated)
+        if len(poses) < 2:
+            raise GoalFailed(f'only {len(poses)} sweep poses show the marker and the spot')
+        feedback.phase, feedback.total = 'sweeping', len(poses)
+        used = 0
+        for index, x in enumerate(poses):
+            feedback.index = index
+            goal_handle.publish_feedback(feedback)
+            await self._move(goal_handle, x)
+            seen = await self._observe(goal_handle, self.observe_frames)
+            observations += len(seen)
+            used += bool(seen)
+            feedback.observations = observations
+        feedback.phase = 'estimating'
+        goal_handle.publish_feedback(feedback)
+        response = await self._estimate(request.method, observations)
+        result.estimate = response.estimate
+        result.poses_used, result.observations = used, observations
+        if not response.success:
+            raise GoalFailed(f'estimate_sun after the sweep: {response.message}')
+        self.sun = response.estimate
+        result.message = (f'{used} of {len(poses)} sweep poses saw the spot, {observations} '
+                          f'observations: {response.message}')
+
+    # ---- focal calibration ------------------------------------------------------------------
+
+    async def _execute_calibrate_focus(self, goal_handle, result):
+        request = goal_handle.request
+        sun = self._sun_ray()
+        camera = await self._need_camera()
+        d_min = request.d_min or self.focus_sweep[0]
+        d_max = request.d_max or self.focus_sweep[1]
+        step = request.step or self.focus_sweep[2]
+        if not (0.0 < d_min < d_max and step > 0.0 and (d_max - d_min) / step < 1000):
+            raise GoalFailed(f'bad sweep: d_min {d_min}, d_max {d_max}, step {step} m')
+        distances = np.round(np.arange(d_min, d_max + 0.5 * step, step), 6)
+        target = point_to_array(request.target)
+        T_robot_world = self.rig.parameters.T_robot_world
+        if not np.any(target):
+            target = self._focus_target(sun, camera, distances)
+        feedback = CalibrateFocus.Feedback(total=len(distances))
+        areas = []
+        for index, d_lp in enumerate(distances):
+            lens = self.rig.lens_pose_for_target(transform_points(T_robot_world, target), sun,
+                                                 float(d_lp))
+            if lens.x is None:
+                raise GoalFailed(f'd_lp {d_lp * 100:.1f} cm over {target[:2].tolist()} is '
+                                 f'unreachable: {lens.reason}')
+            await self._move(goal_handle, lens.x)
+            seen = await self._observe(goal_handle, self.observe_frames)
+            area = float(np.median([m.area for m in seen])) if seen else math.nan
+            areas.append(area)
+            feedback.index, feedback.d_lp, feedback.area = index, float(d_lp), area
+            goal_handle.publish_feedback(feedback)
+        result.d_lp = [float(d) for d in distances]
+        result.areas = [float(a) for a in areas]
+        measured = np.isfinite(areas)
+        try:
+            fit = calibrate_focus(distances[measured], np.asarray(areas)[measured])
+        except ValueError as error:
+            raise GoalFailed(f'focal calibration: {error} ({np.count_nonzero(measured)} of '
+                             f'{len(distances)} distances gave a spot)') from None
+        result.heating_distance = fit.best_d_lp
+        result.sample_best_d_lp = fit.sample_best_d_lp
+        result.min_area = fit.min_area
+        result.fit_rms_relative = fit.fit.rms_relative
+        if request.apply:
+            self._apply_focus(fit)
+            message = FocalCalibration(heating_distance=fit.best_d_lp, min_area=fit.min_area,
+                                       fit_rms_relative=fit.fit.rms_relative,
+                                       samples=int(np.count_nonzero(measured)))
+            message.header.stamp = self.get_clock().now().to_msg()
+            self.focus_publisher.publish(message)
+            result.saved_to = self._save('focus.yaml', {
+                'heating_distance': float(fit.best_d_lp),
+                'lens': {'focal_length': float(self.lens.focal_length)}})
+        result.message = (f'smallest spot at d_lp {fit.best_d_lp * 100:.2f} cm (fit), '
+                          f'{fit.sample_best_d_lp * 100:.1f} cm (samples), '
+                          f'{fit.min_area * 1e6:.2f} mm^2; fit rms '
+                          f'{fit.fit.rms_relative * 100:.1f} %'
+                          + ('' if request.apply else ' (not applied)'))
+
+    def _focus_target(self, sun, camera, distances):
+        """
+        Return the panel point from which most of the sweep shows the marker and the spot.
+
+        The distances around the heating distance (where the minimum should be) must all be
+        seen; at least 60% of the whole sweep.
+        """
+        T_robot_world = self.rig.parameters.T_robot_world
+        best, best_count = None, -1
+        probe = distances[::max(1, len(distances) // 12)]
+        near = [d for d in distances if abs(d - self.heating_distance) <= 0.004]
+        for point in self.view_points:
+            target = np.array([point[0], point[1], 0.0])
+
+            def seen(d_lp):
+                x = self.rig.lens_pose_for_target(transform_points(T_robot_world, target), sun,
+                                                  float(d_lp)).x
+                return x is not None and sun_sweep.sees_marker_and_spot(
+                    self.rig, x, sun, camera, T_robot_world, self.marker_side,
+                    self.view_margin, need_marker=not self.world_calibrated)
+            if not all(seen(d) for d in near):
+                continue
+            count = sum(seen(d) for d in probe)
+            if count > best_count:
+                best, best_count = target, count
+        if best is None or best_count < 0.6 * len(probe):
+            raise GoalFailed('no panel point shows the marker and the spot over most of the '
+                             'sweep for this sun; give the goal a target')
+        return best
+
+    def _apply_focus(self, fit):
+        """Use the found heating distance; scale the lens model's focus to match it."""
+        model_best = _model_best_distance(self.lens, self.heating_distance)
+        scale = fit.best_d_lp / model_best if model_best > 0 else 1.0
+        self.lens = type(self.lens)(**{**self.lens.__dict__,
+                                       'focal_length': self.lens.focal_length * scale})
+        self.targeting = FocusTargeting(self.rig, self.lens, rays=self.focus_rays)
+        self.heating_distance = fit.best_d_lp
+
+
+def _model_best_distance(lens, around):
+    """Return the d_lp of the lens model's smallest spot near `around` [m]."""
+    distances = np.linspace(around - 0.01, around + 0.01, 41)
+    areas = [spot_area_at(lens, d) for d in distances]
+    return float(distances[int(np.argmin(areas))])
+
+
+def _obliquity(T_world_camera):
+    """Return the angle between the line of sight to the marker (world origin) and its normal."""
+    sight = -T_world_camera[:3, 3] / np.linalg.norm(T_world_camera[:3, 3])
+    return math.acos(min(1.0, max(-1.0, -float(sight[2]))))
+
+
+def _has_marker_pose(message):
+    """
+    Return whether a spot observation carries a camera pose from the marker (Eqs 7-9).
+
+    Observed after the arm stopped, it was detected after the move: the spot detector
+    detects the marker again whenever the joints change, and reuses it while they are still.
+    A pose from the kinematics (no marker in view) would calibrate the rig with itself.
+    """
+    return message.camera_pose_source == 'marker'
+
+
+def _utc(seconds):
+    return datetime.datetime.fromtimestamp(seconds, tz=datetime.timezone.utc)
+
+
+def main(args=None):
+    """Run the lens_planner node."""
+    run_node(LensPlannerNode, args)
+
+
+if __name__ == '__main__':
+    main()

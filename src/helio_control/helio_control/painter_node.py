@@ -1,0 +1,660 @@
+"""
+Node painter: Algorithm 1 of the paper as the ``paint`` action (helio_msgs/PaintPattern).
+
+Per goal (paper Sec. IV-B and IV-C, Algorithm 1):
+
+1. robot-world calibration (``calibrate_world`` of the lens planner; once per node, or
+   every goal, by parameter) and, without a sun estimate, the sun sweep (``sweep_sun``);
+2. the plan (``helio_control.plan``): the picture (or the goal's points) to ordered world
+   dots with per-dot N_p targets, checked against the rig's reach for the estimated sun;
+3. per dot: ``focus`` at the heating distance (the focal calibration's, ``calibration/focus``,
+   else the parameter); hold while N_p < the dot's target (``dot_cycle``); retreat by delta
+   d_lp; with the paper's cooling rule wait until N_p is back to 0, with the ``window``
+   rule count N_p only within ``window_radius`` of the dot (``thermal/window``: the previous
+   dot's afterglow does not count) and go on at once; the sun estimate follows the sun by
+   Eq 18 (``sun_estimator`` republishes it).
+
+Beyond the paper:
+
+- **clouds**: a loss of sun while heating (``dot_cycle``: N_p or T_max falling, or no light
+  spot) retreats the lens and waits for the sun (the spot seen again in a row of frames, at
+  most ``cloud_timeout``), then heats the same dot again with its full target;
+- **fire-safety watchdog**: the lens never rests at the heating distance without fresh
+  thermal data. Thermal statistics older than ``thermal_stale`` (node clock, or
+  ``thermal_stale_wall`` of wall time), a dot held past ``max_heating``, a device fault or
+  alarm (``dobot/status``, ``servo/status``), a cancel, or the node stopping: the lens
+  retreats at once (``focus`` at the retreat distance; if the arm cannot move, the wrist
+  turns the lens off the sun) and the goal ends saying why;
+- **resume**: every finished dot is appended (and flushed) to the run's ``journal.jsonl``;
+  the same goal sent again continues an unfinished run at its first unburnt dot, with the
+  same plan, none lost and none doubled (``fresh`` starts over; ``start_index`` skips the
+  dots before it);
+- **dry run**: the whole painting with the lens at the retreat distance: reach and timing
+  without burning;
+- **tones**: each dot's own N_p target (the plan's, Fig. 8d).
+
+The run directory (``run_dir`` of the goal, else ``runs_dir``/<UTC time>) holds
+``plan.json``, ``journal.jsonl`` (``helio_control.run_journal``) and ``resume.json``.
+"""
+
+import datetime
+import glob
+import hashlib
+import json
+import math
+import os
+import time
+import traceback
+
+from geometry_msgs.msg import PointStamped
+from helio_control.dot_cycle import CycleSettings, Decision, DotCycle
+from helio_control.picture_input import picture_from_image_msg, PictureError
+from helio_control.plan import options_from_goal, Plan, plan_dots, plan_picture
+from helio_control.plan import PlanError, PlanOptionsError
+from helio_control.run_journal import goal_to_dict, JournalError, JournalWriter, read_journal
+from helio_msgs.action import CalibrateWorld, FocusLens, MoveWrist, PaintPattern, SweepSun
+from helio_msgs.msg import DeviceStatus, FocalCalibration, SpotObservation, SunEstimate
+from helio_msgs.msg import ThermalStats
+from helio_optics.node_kit.awaitables import discovered, FirstOf
+from helio_optics.node_kit.conversions import point_to_array
+from helio_optics.node_kit.deployment import declare_rig, follow_world_calibration
+from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.runner import run_node
+import numpy as np
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+RELIABLE = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE)
+COOLING_RULES = ('paper', 'window')
+# Goal fields that do not change what is painted (a resumed goal may differ in them).
+NOT_THE_PICTURE = ('run_dir', 'fresh', 'start_index', 'dry_run')
+
+
+class PaintFailed(Exception):
+    """The painting cannot go on; the message is the goal's result message."""
+
+
+class PaintCanceled(Exception):
+    """The goal was canceled."""
+
+
+def goal_key(goal):
+    """
+    Return a key naming what a goal paints.
+
+    The goal's fields but NOT_THE_PICTURE, and the picture's content (an edited file is a
+    new painting).
+    """
+    fields = {k: v for k, v in goal_to_dict(goal).items() if k not in NOT_THE_PICTURE}
+    if goal.image_path and os.path.isfile(goal.image_path):
+        with open(goal.image_path, 'rb') as stream:
+            fields['image_sha256'] = hashlib.sha256(stream.read()).hexdigest()
+    if goal.image.width:
+        fields['image_sha256'] = hashlib.sha256(bytes(goal.image.data)).hexdigest()
+    return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def unfinished_run(runs_dir, key):
+    """
+    Return (run dir, burnt indices) of the newest unfinished run of the goal `key`, or None.
+
+    A run is unfinished when its journal has no result line or an unsuccessful one. The
+    burnt dots are those of its journal and of the runs it resumed (``resume.json``).
+    """
+    candidates = []
+    for resume in glob.glob(os.path.join(runs_dir, '*', 'resume.json')):
+        try:
+            with open(resume) as stream:
+                state = json.load(stream)
+        except (OSError, ValueError):
+            continue
+        if state.get('goal_key') == key:
+            candidates.append((os.path.getmtime(resume), os.path.dirname(resume), state))
+    for _, run_dir, state in sorted(candidates, reverse=True):
+        journal_path = os.path.join(run_dir, 'journal.jsonl')
+        try:
+            journal = read_journal(journal_path)
+        except (OSError, JournalError):
+            continue
+        if journal.result is not None and journal.result.success:
+            return None              # the newest run of this goal finished: start over
+        burnt = set(state.get('burnt_before', []))
+        burnt.update(dot.index for dot in journal.dots if dot.outcome == 'burnt')
+        return run_dir, burnt
+    return None
+
+
+class PainterNode(Node):
+    """See the module docstring."""
+
+    def __init__(self, **kwargs):
+        """Declare parameters and open the interfaces."""
+        super().__init__('painter', **kwargs)
+        self.rig, _ = declare_rig(self)
+        follow_world_calibration(self, self.rig)
+        self.heating_distance = declare(
+            self, 'heating_distance', 0.082,
+            'd_lp of a dot until a focal calibration arrives on calibration/focus (paper: '
+            '8.2 cm) [m].', 0.02, 0.3)
+        self.retreat_offset = declare(self, 'retreat_offset', 0.03,
+                                      "Retreat delta d_lp after a dot (the paper's 3 cm) [m].",
+                                      0.005, 0.2)
+        self.cooling = declare(self, 'cooling', 'window',
+                               "Before the next dot: 'paper' waits until N_p is 0; 'window' "
+                               'counts N_p only near the dot and goes on at once.',
+                               choices=COOLING_RULES)
+        self.window_radius = declare(self, 'window_radius', 0.004,
+                                     'Radius of the N_p window around the dot (world) [m].',
+                                     0.0005, 0.05)
+        self.max_heating = declare(self, 'max_heating', 90.0,
+                                   'A dot held longer than this is given up [s].', 1.0, 3600.0)
+        self.max_cooling = declare(self, 'max_cooling', 60.0,
+                                   "Longest wait for N_p = 0 (paper's rule) [s].", 1.0, 3600.0)
+        self.thermal_stale = declare(
+            self, 'thermal_stale', 0.5,
+            'Thermal statistics older than this (node clock) while the lens is at the heating '
+            'distance: retreat and stop [s].', 0.05, 10.0)
+        self.thermal_stale_wall = declare(
+            self, 'thermal_stale_wall', 2.0,
+            'The same on the wall clock, so a stopped /clock cannot hold the lens [s].',
+            0.1, 60.0)
+        self.cloud_timeout = declare(self, 'cloud_timeout', 600.0,
+                                     'Longest wait for the sun after a cloud [s].',
+                                     1.0, 86400.0)
+        self.sun_back_frames = declare(self, 'sun_back_frames', 5,
+                                       'Valid spot observations in a row that say the sun is '
+                                       'back [-].', 1, 100)
+        self.calibrate_world = declare(self, 'calibrate_world', 'once',
+                                       "Robot-world calibration before a painting: 'once' per "
+                                       "node, 'always', or 'never'.",
+                                       choices=('once', 'always', 'never'))
+        self.server_timeout = declare(self, 'server_timeout', 60.0,
+                                      'Wait at most this long for the lens planner (wall) [s].',
+                                      0.1, 3600.0)
+        self.runs_dir = os.path.abspath(os.path.expanduser(declare(
+            self, 'runs_dir', 'runs', 'Where runs are written (a relative path is taken from '
+            'the working directory).')))
+        self.device_silence = declare(
+            self, 'device_silence', 1.0,
+            'A driver whose joint states stopped this long (wall clock) is a device fault '
+            'while heating [s].', 0.1, 60.0)
+        self.wrist_turn = declare(self, 'wrist_escape_pitch', 0.6,
+                                  'If the arm cannot retreat, turn the lens pitch by this to '
+                                  'put the focus off the wood [rad].', 0.05, 1.5)
+
+        self.sun = None
+        self.stats = None
+        self.stats_wall = 0.0
+        self.world_calibrated = False
+        self.faults = {}
+        self._stats_waiters = []
+        self._spot_waiters = []
+        self._busy = False
+        self._cancel_requested = False
+        self._at_heating = None            # (target, d_lp) while the lens is focused on wood
+        self.create_subscription(ThermalStats, 'thermal/stats', self._on_stats, RELIABLE)
+        self.create_subscription(SunEstimate, 'sun/estimate', self._on_sun, LATCHED)
+        self.create_subscription(FocalCalibration, 'calibration/focus', self._on_focus_cal,
+                                 LATCHED)
+        self.create_subscription(SpotObservation, 'spot', self._on_spot, RELIABLE)
+        for device in ('dobot', 'servo'):
+            self.create_subscription(DeviceStatus, f'{device}/status', self._on_status, LATCHED)
+        self.heard = {}                    # device -> wall time of its last joint state
+        self.create_subscription(JointState, 'joint_states', self._on_joints, 20)
+        self.window_publisher = self.create_publisher(PointStamped, 'thermal/window', LATCHED)
+        self.focus = ActionClient(self, FocusLens, 'focus')
+        self.world = ActionClient(self, CalibrateWorld, 'calibrate_world')
+        self.sweep = ActionClient(self, SweepSun, 'sweep_sun')
+        self.wrist = ActionClient(self, MoveWrist, 'move_wrist')
+        self._focus_handles = []
+        ActionServer(self, PaintPattern, 'paint', self._execute,
+                     goal_callback=lambda goal: GoalResponse.ACCEPT,
+                     cancel_callback=self._on_cancel)
+        self.get_logger().info(f'painter: heating {self.heating_distance * 100:.1f} cm, '
+                               f'retreat {self.retreat_offset * 100:.1f} cm, cooling rule '
+                               f'{self.cooling}, runs in {self.runs_dir}')
+
+    # ---- inputs ---------------------------------------------------------------------------
+
+    def _now(self):
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_stats(self, message):
+        self.stats, self.stats_wall = message, time.monotonic()
+        for waiter in list(self._stats_waiters):
+            waiter.offer(message)
+
+    def _on_sun(self, message):
+        if message.converged:
+            self.sun = message
+
+    def _on_focus_cal(self, message):
+        if math.isfinite(message.heating_distance) and message.heating_distance > 0.0:
+            self.heating_distance = message.heating_distance
+            self.get_logger().info(f'heating distance from the focal calibration: '
+                                   f'{self.heating_distance * 100:.2f} cm')
+
+    def _on_spot(self, message):
+        for waiter in list(self._spot_waiters):
+            waiter(message)
+
+    def _on_joints(self, message):
+        device = 'servo' if 'lens_pitch' in message.name else 'dobot'
+        self.heard[device] = time.monotonic()
+
+    def _silent_devices(self):
+        """Return the drivers whose joint states stopped (wall clock), as sentences."""
+        now = time.monotonic()
+        return [f'{device} silent for {now - heard:.1f} s (no joint states: driver stopped?)'
+                for device, heard in self.heard.items() if now - heard > self.device_silence]
+
+    def _on_status(self, message):
+        problem = ''
+        if not message.connected:
+            problem = f'{message.device} not connected ({message.message})'
+        elif message.alarms:
+            problem = f'{message.device} alarm: {", ".join(message.alarms)}'
+        if problem:
+            self.faults[message.device] = problem
+        else:
+            self.faults.pop(message.device, None)
+
+    def _on_cancel(self, _goal_handle):
+        self._cancel_requested = True
+        for waiter in list(self._stats_waiters):
+            waiter.offer(None)              # wake the heating loop at once
+        return CancelResponse.ACCEPT
+
+    # ---- waits and moves ------------------------------------------------------------------
+
+    async def _next_stats(self):
+        """Return the next thermal statistics, or None when they are stale (watchdog)."""
+        waiter = FirstOf()
+        self._stats_waiters.append(waiter)
+        node_timer = self.create_timer(self.thermal_stale, lambda: waiter.offer(None))
+        wall_timer = self.create_timer(self.thermal_stale_wall, lambda: waiter.offer(None),
+                                       clock=Clock(clock_type=ClockType.STEADY_TIME))
+        try:
+            return await waiter
+        finally:
+            self._stats_waiters.remove(waiter)
+            self.destroy_timer(node_timer)
+            self.destroy_timer(wall_timer)
+
+    async def _server(self, client, name):
+        try:
+            await discovered(self, client.server_is_ready, self.server_timeout,
+                             f'{name} (is the lens_planner running?)')
+        except TimeoutError as error:
+            raise PaintFailed(str(error)) from None
+
+    async def _run_action(self, client, name, goal):
+        """Send a goal and return its result (PaintFailed when refused)."""
+        await self._server(client, name)
+        handle = await client.send_goal_async(goal)
+        if not handle.accepted:
+            raise PaintFailed(f'{name} refused the goal')
+        self._focus_handles.append(handle)
+        try:
+            return (await handle.get_result_async()).result
+        finally:
+            self._focus_handles.remove(handle)
+
+    async def _focus(self, target, d_lp):
+        goal = FocusLens.Goal(d_lp=float(d_lp))
+        goal.target.header.frame_id = 'world'
+        goal.target.point.x, goal.target.point.y = float(target[0]), float(target[1])
+        result = await self._run_action(self.focus, 'focus', goal)
+        return result
+
+    async def _retreat(self, why):
+        """Put the focus off the wood; return what was done (never raises)."""
+        if self._at_heating is None:
+            return 'the lens was not at the heating distance'
+        target, d_lp = self._at_heating
+        try:
+            result = await self._focus(target, d_lp + self.retreat_offset)
+            if result.success:
+                self._at_heating = None
+                return f'retreated ({why})'
+            failure = result.message
+        except PaintFailed as error:
+            failure = str(error)
+        # the arm cannot move: turn the lens off the sun with the wrist
+        try:
+            pitch = float(self.wrist_turn)
+            result = await self._run_action(self.wrist, 'move_wrist',
+                                            MoveWrist.Goal(yaw=0.0, pitch=pitch))
+            if result.success:
+                self._at_heating = None
+                return f'the arm could not retreat ({failure}); the wrist turned the lens away'
+            return f'RETREAT FAILED: {failure}; the wrist: {result.message}'
+        except PaintFailed as error:
+            return f'RETREAT FAILED: {failure}; the wrist: {error}'
+
+    def _set_window(self, target):
+        message = PointStamped()
+        message.header.stamp = self.get_clock().now().to_msg()
+        message.header.frame_id = 'world'
+        if target is None:
+            message.point.x = message.point.y = message.point.z = math.nan
+        else:
+            message.point.x, message.point.y = float(target[0]), float(target[1])
+            message.point.z = float(self.window_radius)    # the radius rides in z [m]
+        self.window_publisher.publish(message)
+
+    async def _wait_for_sun(self, goal_handle, feedback):
+        """Wait until the spot is seen in `sun_back_frames` frames in a row; return seconds."""
+        started = self._now()
+        seen = {'run': 0}
+        back = FirstOf()
+
+        def on_spot(message):
+            seen['run'] = seen['run'] + 1 if message.valid else 0
+            if seen['run'] >= self.sun_back_frames:
+                back.offer(True)
+        self._spot_waiters.append(on_spot)
+        timer = self.create_timer(self.cloud_timeout, lambda: back.offer(False))
+        cancel = self.create_timer(0.2, lambda: self._cancel_requested and back.offer(False))
+        feedback.phase = 'waiting_for_sun'
+        goal_handle.publish_feedback(feedback)
+        try:
+            returned = await back
+        finally:
+            self._spot_waiters.remove(on_spot)
+            self.destroy_timer(timer)
+            self.destroy_timer(cancel)
+        if self._cancel_requested:
+            raise PaintCanceled()
+        if not returned:
+            raise PaintFailed(f'the sun did not come back within {self.cloud_timeout:g} s')
+        return self._now() - started
+
+    # ---- the painting ---------------------------------------------------------------------
+
+    async def _execute(self, goal_handle):
+        result = PaintPattern.Result()
+        if self._busy:
+            result.message = 'busy: another painting runs'
+            goal_handle.abort()
+            return result
+        self._busy, self._cancel_requested = True, False
+        started, wall_started = self._now(), time.time()
+        try:
+            await self._paint(goal_handle, result)
+            if result.success:
+                goal_handle.succeed()
+            else:
+                goal_handle.abort()
+        except PaintCanceled:
+            result.message = 'canceled: ' + await self._retreat('cancel')
+            goal_handle.canceled()
+        except PaintFailed as failure:
+            result.message = f'{failure}; {await self._retreat(str(failure))}'
+            goal_handle.abort()
+        except Exception as error:           # a bug: retreat, then say what happened
+            self.get_logger().error(traceback.format_exc())
+            result.message = (f'internal error: {type(error).__name__}: {error}; '
+                              f'{await self._retreat("internal error")}')
+            goal_handle.abort()
+        finally:
+            self._set_window(None)
+            self._busy = False
+            result.duration = self._now() - started
+            writer = getattr(self, '_journal', None)
+            if writer is not None:
+                writer.result(success=bool(result.success), dots_burnt=int(result.dots_burnt),
+                              dots_skipped=int(result.dots_skipped),
+                              duration=float(result.duration),
+                              wall_duration=time.time() - wall_started, message=result.message)
+                writer.close()
+                self._journal = None
+        if result.success:
+            self.get_logger().info(f'paint: {result.message}')
+        else:
+            self.get_logger().warning(f'paint: {result.message}')
+        return result
+
+    def _check(self):
+        if self._cancel_requested:
+            raise PaintCanceled()
+        faults = list(self.faults.values()) + self._silent_devices()
+        if faults:
+            raise PaintFailed('device fault: ' + '; '.join(faults))
+
+    async def _prepare(self, goal_handle, feedback):
+        """Calibrate the world and estimate the sun when needed (Algorithm 1 lines 1-2)."""
+        if self.calibrate_world == 'always' or (self.calibrate_world == 'once'
+                                                and not self.world_calibrated):
+            feedback.phase = 'calibrating'
+            goal_handle.publish_feedback(feedback)
+            world = await self._run_action(self.world, 'calibrate_world',
+                                           CalibrateWorld.Goal(apply=True))
+            if not world.success:
+                raise PaintFailed(f'robot-world calibration failed: {world.message}')
+            self.world_calibrated = True
+        self._check()
+        if self.sun is None:
+            feedback.phase = 'estimating_sun'
+            goal_handle.publish_feedback(feedback)
+            sweep = await self._run_action(self.sweep, 'sweep_sun', SweepSun.Goal())
+            if not sweep.success:
+                raise PaintFailed(f'sun estimation failed: {sweep.message}')
+            self.sun = sweep.estimate
+        self._check()
+
+    def _make_plan(self, goal):
+        try:
+            options = options_from_goal(goal)
+            options.d_lp, options.retreat = self.heating_distance, self.retreat_offset
+            sun = point_to_array(self.sun.direction)
+            if goal.points:
+                points = np.array([[p.x, p.y] for p in goal.points], dtype=float)
+                return plan_dots(points, options, self.rig, sun)
+            picture = goal.image_path if goal.image_path else \
+                picture_from_image_msg(goal.image)
+            return plan_picture(picture, options, self.rig, sun)
+        except (PictureError, PlanError, PlanOptionsError, ValueError) as error:
+            raise PaintFailed(f'cannot plan the painting: {error}') from None
+
+    async def _paint(self, goal_handle, result):
+        goal = goal_handle.request
+        feedback = PaintPattern.Feedback(phase='planning')
+        began = self._now()
+        # check the goal before anything moves
+        sources = [bool(goal.image_path), goal.image.width > 0, len(goal.points) > 0]
+        if sum(sources) != 1:
+            raise PaintFailed('give exactly one source of dots: image_path, image or points '
+                              f'(got {sum(sources)})')
+        if goal.image_path and not goal.image_path.startswith('sample:') \
+                and not os.path.isfile(goal.image_path):
+            raise PaintFailed(f"image_path {goal.image_path!r}: no such file on the painter's "
+                              'machine (or sample:NAME for a picture the project makes)')
+        if goal.cooling and goal.cooling not in COOLING_RULES:
+            raise PaintFailed(f'cooling must be one of {COOLING_RULES} or empty, got '
+                              f'{goal.cooling!r}')
+        try:
+            options_from_goal(goal).validate()
+        except PlanOptionsError as error:
+            raise PaintFailed(f'bad goal: {error}') from None
+        key = goal_key(goal)
+        await self._prepare(goal_handle, feedback)
+        resumed = None if goal.fresh else unfinished_run(self.runs_dir, key)
+        if resumed is not None:
+            try:
+                with open(os.path.join(resumed[0], 'plan.json')) as stream:
+                    plan = Plan.from_json(stream.read())
+            except (OSError, ValueError, KeyError) as error:
+                raise PaintFailed(f'cannot resume {resumed[0]}: {error}') from None
+            burnt = resumed[1]
+        else:
+            plan = self._make_plan(goal)
+            burnt = set()
+        run_dir = os.path.abspath(goal.run_dir) if goal.run_dir else os.path.join(
+            self.runs_dir, datetime.datetime.now(datetime.timezone.utc).strftime(
+                '%Y%m%dT%H%M%SZ'))
+        os.makedirs(run_dir, exist_ok=True)
+        with open(os.path.join(run_dir, 'plan.json'), 'w') as stream:
+            stream.write(plan.to_json())
+        with open(os.path.join(run_dir, 'resume.json'), 'w') as stream:
+            json.dump({'goal_key': key, 'burnt_before': sorted(burnt),
+                       'resumed_from': resumed[0] if resumed else ''}, stream)
+        self._journal = JournalWriter(os.path.join(run_dir, 'journal.jsonl'))
+        self._journal.run(goal, began, time.time())
+        result.run_dir = run_dir
+        result.dots_planned = len(plan.dots)
+        result.dots_resumed = len(burnt)
+        if not len(plan.dots):
+            raise PaintFailed('the plan has no dot: ' + '; '.join(
+                f'{reason}' for _, reason in plan.rejected[:3]) if plan.rejected else
+                'the plan has no dot')
+        cooling = goal.cooling or self.cooling
+        per_dot = plan.time_estimate.get('per_dot_s', 0.0)
+        todo = [i for i in range(len(plan.dots)) if i not in burnt and i >= goal.start_index]
+        result.time_estimated = per_dot * len(todo)
+        result.dots_skipped = len(plan.dots) - len(todo) - len(burnt)
+        feedback.total = len(plan.dots)
+        cycles = []
+        failed = 0
+        for i in range(len(plan.dots)):
+            if i not in todo:
+                continue
+            self._check()
+            target = plan.dots[i]
+            n_p_target = int(plan.n_p_targets[i])
+            remaining = len(todo) - todo.index(i)
+            mean = float(np.mean(cycles)) if cycles else per_dot
+            feedback.index = i
+            feedback.elapsed = self._now() - began
+            feedback.eta = mean * remaining
+            outcome = await self._paint_dot(goal_handle, feedback, i, target, n_p_target,
+                                            cooling, goal.dry_run, result)
+            cycles.append(outcome['end'] - outcome['start'])
+            self._journal.dot(**outcome)
+            if outcome['outcome'] == 'burnt':
+                result.dots_burnt += 1
+            elif outcome['outcome'] == 'failed':
+                failed += 1
+            else:
+                result.dots_skipped += 1
+        feedback.phase, feedback.index = 'done', len(plan.dots)
+        goal_handle.publish_feedback(feedback)
+        if goal.dry_run:
+            result.success = failed == 0
+            result.message = (f'dry run: {len(todo) - failed} of {len(todo)} dots reached at '
+                              'the retreat distance')
+        else:
+            result.success = failed == 0
+            result.message = f'{result.dots_burnt} dots burnt'
+        result.message += (f' in {self._now() - began:.0f} s (the plan estimated '
+                           f'{result.time_estimated:.0f} s); {result.dots_resumed} burnt '
+                           f'before, {result.dots_skipped} skipped, {failed} failed, of '
+                           f'{len(plan.dots)}; waited {result.cloud_wait:.0f} s for the '
+                           f'sun; run in {run_dir}')
+        if plan.rejected:
+            result.message += f'; {len(plan.rejected)} picture dots left out by the plan'
+
+    async def _paint_dot(self, goal_handle, feedback, index, target, n_p_target, cooling,
+                         dry_run, result):
+        """Burn one dot (Algorithm 1 lines 6-14); return its journal record's fields."""
+        start = self._now()
+        record = {'index': int(index), 'target': [float(target[0]), float(target[1])],
+                  'n_p_target': n_p_target, 'start': start, 'end': start, 'dwell': 0.0,
+                  'peak_n_p': 0, 't_max': -273.15, 'outcome': 'burnt', 'reason': ''}
+        d_heat = self.heating_distance
+        if dry_run:
+            feedback.phase = 'moving'
+            goal_handle.publish_feedback(feedback)
+            moved = await self._focus(target, d_heat + self.retreat_offset)
+            record.update(end=self._now(), outcome='skipped' if moved.success else 'failed',
+                          reason='dry run' if moved.success else moved.message)
+            return record
+        settings = CycleSettings(n_p_target=n_p_target, max_heating=self.max_heating,
+                                 max_cooling=self.max_cooling,
+                                 wait_for_zero=(cooling == 'paper'))
+        cycle = DotCycle(settings)
+        window = cooling == 'window'
+        self._set_window(target if window else None)
+        while True:                                   # again after a cloud
+            feedback.phase = 'moving'
+            goal_handle.publish_feedback(feedback)
+            moved = await self._focus(target, d_heat)
+            if not moved.success:
+                record.update(end=self._now(), outcome='failed', reason=moved.message)
+                return record
+            self._at_heating = (target, d_heat)
+            cycle.start_heating(self._now())
+            feedback.phase = 'heating'
+            decision = Decision.HEAT
+            while decision is Decision.HEAT:
+                stats = await self._next_stats()
+                self._check()
+                if stats is None:
+                    raise PaintFailed(f'thermal statistics stale for more than '
+                                      f'{self.thermal_stale:g} s while heating dot {index}')
+                n_p, t_max = _readings(stats, window)
+                feedback.n_p, feedback.t_max = int(n_p), float(t_max)
+                goal_handle.publish_feedback(feedback)
+                record['t_max'] = max(record['t_max'], float(t_max))
+                decision = cycle.update(self._now(), n_p, t_max, stats.camera_cap)
+            retreat = await self._focus(target, d_heat + self.retreat_offset)
+            if not retreat.success:
+                raise PaintFailed(f'the retreat after dot {index} failed: {retreat.message}')
+            self._at_heating = None
+            if decision is Decision.CLOUD:
+                self.get_logger().warning(f'dot {index}: sun lost ({cycle.cloud_reason}); '
+                                          'waiting for it')
+                result.cloud_wait += await self._wait_for_sun(goal_handle, feedback)
+                cycle.restart()
+                continue
+            break
+        record.update(dwell=float(cycle.heating_time), peak_n_p=int(cycle.peak_n_p))
+        if cycle.outcome != 'charred':
+            record.update(outcome='failed', reason=f'N_p reached only {cycle.peak_n_p} of '
+                          f'{n_p_target} in {self.max_heating:g} s (max_heating)')
+        feedback.phase = 'cooling'
+        goal_handle.publish_feedback(feedback)
+        while decision is not Decision.NEXT:
+            stats = await self._next_stats()
+            self._check()
+            if stats is None:
+                break                  # retreated already: a stale stream ends the wait
+            n_p, t_max = _readings(stats, window)
+            feedback.n_p, feedback.t_max = int(n_p), float(t_max)
+            goal_handle.publish_feedback(feedback)
+            decision = cycle.update(self._now(), n_p, t_max, stats.camera_cap)
+        record['end'] = self._now()
+        return record
+
+    def destroy_node(self):
+        """Leave the lens off the wood if a painting is cut short (best effort)."""
+        if self._at_heating is not None:
+            target, d_lp = self._at_heating
+            goal = FocusLens.Goal(d_lp=float(d_lp + self.retreat_offset))
+            goal.target.header.frame_id = 'world'
+            goal.target.point.x, goal.target.point.y = float(target[0]), float(target[1])
+            if self.focus.server_is_ready():
+                self.focus.send_goal_async(goal)
+                self.get_logger().warning('stopping while heating: retreat sent')
+        return super().destroy_node()
+
+
+def _readings(stats, window):
+    """Return (N_p, T_max) of the window when it is used and valid, else of the image."""
+    if window and stats.window_valid:
+        return stats.window_n_p, stats.window_t_max
+    return stats.n_p, stats.t_max
+
+
+def main(args=None):
+    """Run the painter node."""
+    run_node(PainterNode, args)
+
+
+if __name__ == '__main__':
+    main()
