@@ -1,0 +1,31 @@
+"""Shared pieces of the system tests: the simulated graph as processes, and a client."""
+
+import contextlib
+import os
+
+from helio_control.bringup import simulated_graph, start_graph
+from helio_optics.node_kit.in_process_graph import InProcessGraph
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@contextlib.contextmanager
+def graph_of_processes(tmp_path, nodes, overrides=None, namespace='',
+                       client_name='system_test_client'):
+    """
+    Start the simulated graph's `nodes` as processes and yield (ProcessGroup, client graph).
+
+    The client graph (an InProcessGraph in the test's process, same namespace) fails every
+    wait at once when a node process dies, naming it with its last log lines. Everything
+    is stopped on exit (SIGINT, then SIGTERM, then SIGKILL).
+    """
+    specs = simulated_graph(str(tmp_path / 'ports'), nodes, overrides)
+    with InProcessGraph(client_name, namespace=namespace) as client:
+        group = start_graph(specs, namespace, log_dir=str(tmp_path / 'logs'),
+                            on_death=lambda process: client.fail(
+                                f'{process.label} exited with status {process.returncode()}; '
+                                f'last log lines:\n{process.tail()}'))
+        try:
+            yield group, client
+        finally:
+            group.stop()

@@ -1,0 +1,355 @@
+"""
+The operator's tools with real processes.
+
+``helio`` sub-commands, graph supervision, the run report of a real simulated painting, and
+the launch entries.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+
+from helio_control.bringup import hardware_graph, node_entries, node_processes
+from helio_control.bringup import simulated_graph
+from helio_control.cli import build_parser, goal_options
+from helio_control.report import make_report, read_dots_csv
+from helio_control.run_journal import JournalWriter
+from helio_msgs.action import PaintPattern
+import numpy as np
+import pytest
+
+HELIO = [sys.executable, '-m', 'helio_control.cli']
+
+
+def helio(*arguments, timeout=120, **kwargs):
+    """Run ``helio`` as a process; return the CompletedProcess."""
+    return subprocess.run(HELIO + list(arguments), capture_output=True, text=True,
+                          timeout=timeout, **kwargs)
+
+
+def wait_for(condition, timeout, what):
+    """
+    Poll `condition()` until it holds; fail naming `what` after `timeout` s.
+
+    For states of other processes, which give no event to wait on (/proc, the process
+    table): polled every 20 ms.
+    """
+    import threading
+    import time
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return
+        threading.Event().wait(0.02)
+    raise AssertionError(f'{what} did not happen within {timeout} s')
+
+
+def alive(pid):
+    """Return whether a process id is still running (not a zombie)."""
+    try:
+        with open(f'/proc/{pid}/stat') as stream:
+            return stream.read().split()[2] != 'Z'
+    except OSError:
+        return False
+
+
+# ---------------------------------------------------------------------------- the command
+@pytest.mark.parametrize('command', ['sim', 'rig', 'paint', 'record', 'replay', 'report'])
+def test_every_sub_command_has_help(command):
+    done = helio(command, '--help')
+    assert done.returncode == 0 and 'usage: helio' in done.stdout
+
+
+def test_preview_is_the_preview_command(tmp_path):
+    done = helio('preview', 'sample:logo', '--out', str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / 'preview.png').is_file() and (tmp_path / 'plan.json').is_file()
+
+
+def test_paint_options_are_the_goal_fields_one_to_one():
+    fields = PaintPattern.Goal.get_fields_and_field_types()
+    options = {name for name, _, _ in goal_options(PaintPattern.Goal)}
+    # every field but the picture's own (image_path from PICTURE, image not on a command line)
+    assert options == set(fields) - {'image_path', 'image'}
+    text = build_parser(PaintPattern).format_help()
+    paint = subprocess.run(HELIO + ['paint', '--help'], capture_output=True, text=True,
+                           timeout=60).stdout
+    assert text and all(f'--{name.replace("_", "-")}' in paint for name in options)
+
+
+@pytest.mark.parametrize('arguments, status, message', [
+    (['paint', '/nonexistent/picture.png', '--no-start'], 1, 'picture not found'),
+    (['paint', 'sample:nothing', '--no-start'], 1, 'no sample picture'),
+    (['paint', 'sample:logo', '--n-p-target', '-3'], 2, 'must be >= 0'),
+    (['paint', 'sample:logo', '--canvas-size', 'wide'], 2, 'invalid _finite_float value'),
+    (['paint', 'sample:logo', '--no-such-option', '1'], 2, 'unrecognized arguments'),
+    (['paint'], 2, 'needs a PICTURE or --points'),
+    (['sim', '--nodes', 'painter_of_dreams'], 1, 'not in the simulated graph'),
+    (['rig', '--dobot-port', '/dev/nonexistent0', '--servo-port', '/dev/nonexistent1'], 1,
+     'does not exist'),
+    (['report', '/nonexistent/run'], 1, 'no run directory'),
+])
+def test_bad_input_exits_non_zero_with_one_line(tmp_path, arguments, status, message):
+    done = helio(*arguments, cwd=str(tmp_path))
+    assert done.returncode == status, done.stderr
+    assert message in done.stderr
+    assert 'Traceback' not in done.stderr
+    assert len([line for line in done.stderr.splitlines() if 'error' in line]) == 1
+
+
+def test_paint_with_no_graph_reachable_says_so_in_one_line(tmp_path):
+    done = helio('paint', 'sample:logo', '--no-start', '--connect-timeout', '1', '--out',
+                 str(tmp_path / 'run'), '--namespace', '/nobody_here')
+    assert done.returncode == 1
+    assert 'no painter answers on /nobody_here/paint within 1 s' in done.stderr
+    assert 'Traceback' not in done.stderr
+
+
+def test_paint_starts_the_simulated_graph_paints_reports_and_stops_all_of_it(tmp_path):
+    """No graph running: helio paint starts the simulated one, paints two dots, reports."""
+    targets = [(0.06, 0.06), (0.09, 0.07)]
+    done = helio('paint', '--points', *[f'{x},{y}' for x, y in targets], '--start-timeout',
+                 '120', '--out', str(tmp_path / 'run'), '--namespace', '/paint_test',
+                 timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert 'Traceback' not in done.stderr
+    assert str(tmp_path / 'run' / 'report.html') in done.stdout + done.stderr
+    with open(tmp_path / 'run' / 'summary.json') as stream:
+        summary = json.load(stream)
+    assert (summary['dots_burnt'], summary['dots_skipped'], summary['dots_failed']) == (2, 0, 0)
+    # the world's char map (not the painter's word): two dots, each on its target
+    charred = read_dots_csv(tmp_path / 'run' / 'dots.csv')
+    assert len(charred) == 2
+    for x, y in targets:
+        assert np.min(np.hypot(charred[:, 0] - x, charred[:, 1] - y)) < 0.3e-3
+    logs = tmp_path / 'run' / 'logs'
+    started = sorted(p.stem for p in logs.glob('*.log'))
+    assert {'sim_world', 'dobot_driver', 'lens_planner', 'painter'} <= set(started)
+    # no node process is left: every started executable's pid is gone
+    leftovers = subprocess.run(['pgrep', '-f', str(logs)], capture_output=True, text=True)
+    assert leftovers.stdout.strip() == ''
+
+
+def test_ctrl_c_during_paint_stops_the_graph_it_started_and_exits_130(tmp_path):
+    run = tmp_path / 'run'
+    process = subprocess.Popen(
+        HELIO + ['paint', 'sample:logo', '--connect-timeout', '1', '--start-timeout', '120',
+                 '--out', str(run), '--namespace', '/paint_interrupt'],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    for line in process.stderr:
+        if 'starting the simulated graph' in line:
+            break
+    logs = run / 'logs'
+    # the graph's node processes start (their parameter files name the log folder)
+    wait_for(lambda: subprocess.run(['pgrep', '-f', str(logs)], capture_output=True,
+                                    text=True).stdout.split(), 120.0, 'a node process')
+    process.send_signal(signal.SIGINT)
+    rest = process.stderr.read()
+    assert process.wait(120) == 130, rest
+    assert 'Traceback' not in rest
+    leftovers = subprocess.run(['pgrep', '-f', str(logs)], capture_output=True, text=True)
+    assert leftovers.stdout.strip() == ''
+
+
+# ---------------------------------------------------------------------------- supervision
+def start_sim(tmp_path, *nodes):
+    """Start ``helio sim`` with `nodes`; return (process, {node: pid}) once all are up."""
+    process = subprocess.Popen(
+        HELIO + ['sim', '--nodes', *nodes, '--log-dir', str(tmp_path / 'logs'),
+                 '--stop-timeout', '3', '--port-dir', str(tmp_path / 'ports')],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    pids = {}
+    for line in process.stderr:
+        if ' pid ' in line:
+            name, pid = line.split()[1], int(line.split()[-1])
+            pids[name] = pid
+        if len(pids) == len(nodes):
+            break
+    assert len(pids) == len(nodes), process.stderr.read()
+    return process, pids
+
+
+def test_a_node_that_dies_is_reported_at_once_with_its_log_and_the_graph_stops(tmp_path):
+    process, pids = start_sim(tmp_path, 'sim_world', 'thermal_monitor')
+    os.kill(pids['thermal_monitor'], signal.SIGKILL)
+    rest = process.stderr.read()
+    assert process.wait(60) == 1
+    assert 'node thermal_monitor died (exit status -9)' in rest
+    assert 'its last log lines' in rest
+    assert not any(alive(pid) for pid in pids.values())
+
+
+def test_ctrl_c_stops_every_node_and_exits_130(tmp_path):
+    process, pids = start_sim(tmp_path, 'sim_world', 'thermal_monitor', 'spot_detector')
+    process.send_signal(signal.SIGINT)
+    rest = process.stderr.read()
+    assert process.wait(60) == 130
+    assert 'sim_world (SIGINT)' in rest
+    assert not any(alive(pid) for pid in pids.values())
+
+
+def wait_stopped(pid, timeout=10.0):
+    """Wait until process `pid` is in the stopped state (T) or fail after `timeout` s."""
+    def stopped():
+        with open(f'/proc/{pid}/stat') as stream:
+            return stream.read().rsplit(')', 1)[1].split()[0] == 'T'
+    wait_for(stopped, timeout, f'process {pid} to stop')
+
+
+def test_a_hung_node_is_escalated_to_sigkill(tmp_path):
+    """A node that reacts neither to SIGINT nor to SIGTERM (stopped) ends by SIGKILL."""
+    process, pids = start_sim(tmp_path, 'sim_world', 'thermal_monitor')
+    os.kill(pids['thermal_monitor'], signal.SIGSTOP)
+    wait_stopped(pids['thermal_monitor'])   # SIGINT sent before the stop would be taken first
+    process.send_signal(signal.SIGINT)
+    rest = process.stderr.read()
+    assert process.wait(60) == 130
+    assert 'thermal_monitor (SIGKILL)' in rest and 'sim_world (SIGINT)' in rest
+    assert not any(alive(pid) for pid in pids.values())
+
+
+# ---------------------------------------------------------------------------- bringup/launch
+def test_the_launch_entries_are_what_the_runner_starts(tmp_path):
+    specs = simulated_graph(str(tmp_path))
+    for entry, process in zip(node_entries(specs, '/rig1'), node_processes(specs, '/rig1')):
+        command = process.command()
+        assert command[0].endswith(f'/lib/{entry["package"]}/{entry["executable"]}')
+        for path in entry['parameter_files']:
+            assert path in command and os.path.isfile(path)
+        assert '__ns:=/rig1' in command and f'__node:={entry["name"]}' in command
+    hardware = node_entries(hardware_graph('/dev/ttyUSB7', '/dev/ttyACM3'))
+    assert {e['name'] for e in hardware} >= {'dobot_driver', 'servo_driver', 'spot_detector'}
+    assert 'sim_world' not in {e['name'] for e in hardware}
+    assert all('use_sim_time' not in e['parameters'] for e in hardware)
+    assert next(e for e in hardware if e['name'] == 'dobot_driver')['parameters']['port'] == \
+        '/dev/ttyUSB7'
+
+
+def test_the_launch_files_are_installed_and_name_launch_when_it_is_missing():
+    """``launch`` is not installable here: the files are checked to build from bringup."""
+    from ament_index_python.packages import get_package_share_directory
+    import importlib.util
+    share = get_package_share_directory('helio_control')
+    for graph in ('sim', 'rig'):
+        path = os.path.join(share, 'launch', f'{graph}.launch.py')
+        spec = importlib.util.spec_from_file_location(f'{graph}_launch', path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        try:
+            import launch  # noqa: F401
+        except ImportError:
+            with pytest.raises(ImportError, match='launch_ros'):
+                module.generate_launch_description()
+        else:       # a ROS 2 installation: the description builds
+            assert module.generate_launch_description().entities
+
+
+# ---------------------------------------------------------------------------- run report
+@pytest.fixture(scope='module')
+def painted_run(tmp_path_factory):
+    """Paint three dots in the simulated world (sim_demo); journal them with the writer."""
+    from helio_control.plan import load_plan_options, plan_dots
+    from helio_control.sim_demo import Demo, DEFAULT_DOTS
+    import time
+    run_dir = tmp_path_factory.mktemp('run')
+    targets = DEFAULT_DOTS[:3]
+    plan = plan_dots(np.asarray(targets), load_plan_options(), None, None)
+    (run_dir / 'plan.json').write_text(plan.to_json())
+    demo = Demo(str(run_dir / 'ports'), log=lambda message: None)
+    peaks = {}
+    read = demo.next_thermal_np
+
+    def observed():            # keep each frame's N_p and T_max for the journal
+        n_p, t_max = read()
+        peaks['n_p'] = max(peaks.get('n_p', 0), n_p)
+        peaks['t_max'] = max(peaks.get('t_max', -1e9), t_max)
+        return n_p, t_max
+    demo.next_thermal_np = observed
+    wall = time.time()
+    try:
+        with JournalWriter(str(run_dir / 'journal.jsonl')) as journal:
+            journal.run({'image_path': '', 'points': [list(t) for t in targets]},
+                        demo.world.time, wall)
+            start_all = demo.world.time
+            for index, target in enumerate(plan.dots.tolist()):
+                peaks.clear()
+                start = demo.world.time
+                record, = demo.paint([tuple(target)])
+                journal.dot(index=index, target=target, n_p_target=30, start=start,
+                            end=demo.world.time, dwell=record['heated_s'],
+                            peak_n_p=peaks['n_p'], t_max=peaks['t_max'], outcome='burnt')
+            journal.result(success=True, dots_burnt=3, dots_skipped=0,
+                           duration=demo.world.time - start_all,
+                           wall_duration=time.time() - wall, message='3 dots burnt')
+        demo.world.write_outputs(str(run_dir))
+    finally:
+        demo.close()
+    return run_dir, plan
+
+
+def test_the_report_of_a_simulated_painting_matches_the_worlds_truth(painted_run):
+    run_dir, plan = painted_run
+    done = helio('report', str(run_dir))
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == str(run_dir / 'report.html')
+    summary = json.loads((run_dir / 'summary.json').read_text())
+    assert summary['dots_planned'] == 3 and summary['dots_burnt'] == 3
+    assert summary['dots_skipped'] == 0 and summary['dots_without_char'] == 0
+    # second method: each target's nearest charred dot in the world's dots.csv
+    charred = read_dots_csv(str(run_dir / 'dots.csv'))
+    nearest = [np.min(np.linalg.norm(charred[:, :2] - target, axis=1)) for target in plan.dots]
+    assert summary['mean_placement_error_m'] == pytest.approx(np.mean(nearest), rel=1e-9)
+    assert summary['mean_placement_error_m'] < 1e-3        # aimed with the true sun
+    diameters = charred[:, 2]
+    assert summary['diameter_cv'] == pytest.approx(np.std(diameters) / np.mean(diameters))
+    estimate = plan.time_estimate['total_s']
+    actual = summary['painting_time_s']
+    assert summary['plan_estimate_s'] == pytest.approx(estimate)
+    assert summary['estimate_error_ratio'] == pytest.approx((estimate - actual) / actual)
+    html = (run_dir / 'report.html').read_text()
+    assert html.count('<img') >= 5 and 'src="http' not in html and 'src="data:image/png' in html
+    for name in ('canvas.png', 'overlay.png', 'thermal.png', 'dwell.png', 'placement.png',
+                 'sun.png'):
+        assert (run_dir / name).stat().st_size > 1000, name
+
+
+def test_the_report_refuses_a_directory_without_a_journal(tmp_path):
+    with pytest.raises(ValueError, match='no journal.jsonl'):
+        make_report(str(tmp_path))
+
+
+def test_the_report_reads_the_recording_of_a_run(tmp_path):
+    """A run directory with a recording (the fixture bag) and a journal, no dots.csv."""
+    import shutil
+    from conftest import REPO
+    from pathlib import Path
+    from rosbags.highlevel import AnyReader
+    import yaml
+    bag = os.path.join(REPO, 'bags', 'sim_one_dot')
+    shutil.copytree(bag, tmp_path / 'recording')
+    fixture = yaml.safe_load((tmp_path / 'recording' / 'fixture.yaml').read_text())
+    dot = fixture['dots'][0]
+    with JournalWriter(str(tmp_path / 'journal.jsonl')) as journal:
+        journal.run({'points': [dot['target']]}, dot['focus_start'] - 5.0, 0.0)
+        journal.dot(index=0, target=dot['target'], n_p_target=30, start=dot['focus_start'],
+                    end=dot['focus_end'] + 3.0, dwell=dot['focus_end'] - dot['focus_start'],
+                    peak_n_p=dot['peak_n_p'], t_max=180.9, outcome='burnt')
+    report = make_report(str(tmp_path))
+    # second reader: the recorded thermal statistics through rosbags
+    with AnyReader([Path(tmp_path / 'recording')]) as reader:
+        connections = [c for c in reader.connections if c.topic == '/thermal/stats']
+        t_max = [reader.deserialize(raw, c.msgtype).t_max
+                 for c, _, raw in reader.messages(connections=connections)]
+    from helio_control.report import recording_series
+    series = recording_series(str(tmp_path / 'recording'))
+    assert [value for _, value, _ in series['thermal']] == t_max
+    assert len(series['truth']) > 0 and series['sun'] == []
+    summary = report.summary
+    assert summary['dots_burnt'] == 1 and summary['success'] is False   # no result line
+    assert summary['mean_placement_error_m'] is None                    # no dots.csv
+    assert summary['painting_time_s'] == pytest.approx(dot['focus_end'] + 3.0 -
+                                                       dot['focus_start'] + 5.0)
+    assert (tmp_path / 'thermal.png').stat().st_size > 1000
+    assert 'placement.png' not in report.html_path and not (tmp_path / 'placement.png').exists()
