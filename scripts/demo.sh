@@ -1,15 +1,20 @@
 #!/usr/bin/env bash
-# The main job: a simulated painting that ends with a picture of the burnt panel.
-# Expects the workspace set up and sourced (helio.sh does that). Arguments go to
-# helio_drivers.sim_demo (e.g. --dots 3). Output: runs/<UTC time>/canvas.png and dots.csv.
+# The main job: a painting through the whole graph on the simulated world, ending with the
+# run report (canvas.png: the burnt panel; report.html; summary.json; the MCAP recording).
+# Expects the workspace set up and sourced (helio.sh does that).
 #
-# Today the simulated world (sun, lens, wood, cameras, emulated Dobot and servo controller on
-# pseudo-terminals) is driven through the real serial driver libraries by a compact version of
-# Algorithm 1 that aims with the simulated sun (see helio_drivers/sim_demo.py). The painter
-# and lens_planner nodes with the sun estimator replace that shortcut when they exist.
+#   demo.sh                    paint the sample word (sample:text)
+#   demo.sh PICTURE [opts...]  paint PICTURE (a file or sample:NAME); options go to `helio paint`
+#
+# `helio paint` finds no painter running, so it starts the simulated graph (world, emulated
+# Dobot and servo controller on pseudo-terminals, the driver, perception, sun estimator, lens
+# planner and painter nodes, each its own process), sends the /paint goal, records the run
+# and stops every process it started. The painter calibrates robot-world from the marker,
+# estimates the sun with the sweep, plans the dots and burns them (Algorithm 1).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+picture="${1:-sample:text}"
+[ $# -gt 0 ] && shift
 out="$root/runs/$(date -u +%Y%m%dT%H%M%SZ)"
-mkdir -p "$out"
-python3 -m helio_drivers.sim_demo --out "$out" "$@"
-echo "[helio] the burnt panel: $out/canvas.png (charred dots: $out/dots.csv)"
+python3 -m helio_control paint "$picture" --out "$out" "$@"
+echo "[helio] the burnt panel: $out/canvas.png; the report: $out/report.html"

@@ -12,10 +12,11 @@
 #   5. colcon build of src/ (only when a file under src/ changed since the last build);
 #   6. install/setup.bash sourced.
 # Environment knobs: HELIO_PYTHON (interpreter for .venv, default python3),
-# HELIO_FORCE_BUILD=1 (rebuild even if nothing changed).
+# HELIO_FORCE_BUILD=1 (rebuild even if nothing changed), HELIO_VENV (the virtual
+# environment to use, default .venv in this checkout; several checkouts may share one).
 
 _helio_root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-_helio_venv="$_helio_root/.venv"
+_helio_venv="${HELIO_VENV:-$_helio_root/.venv}"
 
 _helio_log() { printf '[helio setup] %s\n' "$*" >&2; }
 _helio_die() { printf '[helio setup] error: %s\n' "$*" >&2; return 1; }
@@ -144,7 +145,7 @@ _helio_ros_environment() {
 _helio_build() {
     local stamp="$_helio_root/install/.helio-build-stamp"
     if [ -z "${HELIO_FORCE_BUILD:-}" ] && [ -f "$stamp" ] && \
-            [ -z "$(find "$_helio_root/src" -newer "$stamp" -print -quit)" ] \
+            [ -z "$(find "$_helio_root/src" "$_helio_root/config" -newer "$stamp" -print -quit)" ] \
             && [ "$(cat "$stamp")" = "$(ls "$_helio_root/src")" ]; then
         return 0
     fi

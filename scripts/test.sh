@@ -1,21 +1,28 @@
 #!/usr/bin/env bash
-# Run the packages' tests with colcon and report "N passed, M failed[, K skipped]".
+# Run the packages' tests with colcon, then the system tests of test/ (they cross packages)
+# with pytest, and report "N passed, M failed[, K skipped]" over both.
 # Expects the workspace set up and sourced (helio.sh does that).
 #
-#   test.sh                         every package
-#   test.sh helio_optics [...]      only these packages
+#   test.sh                         every package, then test/
+#   test.sh helio_optics [...]      only these packages (add "system" for test/)
+#   test.sh system                  only test/
 #   test.sh -- --pytest-args -k x   arguments after -- go to `colcon test`
-# HELIO_TEST_TIMEOUT (s, default 1500) bounds the whole colcon test run.
+# HELIO_TEST_TIMEOUT (s, default 1500) bounds the colcon test run and the system tests each.
 # Exit status: 0 only when at least one test ran and none failed or errored.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 
 packages=()
-while [ $# -gt 0 ] && [ "$1" != -- ]; do packages+=("$1"); shift; done
+system=0
+while [ $# -gt 0 ] && [ "$1" != -- ]; do
+    if [ "$1" = system ]; then system=1; else packages+=("$1"); fi
+    shift
+done
 [ "${1:-}" = -- ] && shift
-if [ ${#packages[@]} -eq 0 ]; then
+if [ ${#packages[@]} -eq 0 ] && [ "$system" -eq 0 ]; then
     mapfile -t packages < <(colcon list --names-only)
+    system=1
 fi
 
 # A private DDS domain for this run, so tests never hear another graph on this machine.
@@ -24,26 +31,49 @@ export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( (RANDOM % 100) + 100 ))}"
 status=0
 report="$(mktemp)"
 trap 'rm -f "$report"' EXIT
+system_results="build/system_tests"
 (
-    flock 9   # one colcon test at a time in this checkout
+    flock 9   # one test run at a time in this checkout
     for package in "${packages[@]}"; do
         rm -rf "build/$package/test_results" "build/$package/pytest.xml" \
             "build/$package/Testing"
     done
+    rm -rf "$system_results"
+    failed=0
     # A hung test fails the run instead of holding CI until its own limit.
-    timeout --kill-after=30 "${HELIO_TEST_TIMEOUT:-1500}" \
-        colcon test --event-handlers console_cohesion+ summary+ \
-        --packages-select "${packages[@]}" --pytest-args -p no:cacheprovider "$@" || {
-            code=$?
-            [ "$code" -ge 124 ] && echo "error: colcon test stopped after" \
-                "${HELIO_TEST_TIMEOUT:-1500} s (HELIO_TEST_TIMEOUT)" >&2
-            exit 1
-        }
+    if [ ${#packages[@]} -gt 0 ]; then
+        timeout --kill-after=30 "${HELIO_TEST_TIMEOUT:-1500}" \
+            colcon test --event-handlers console_cohesion+ summary+ \
+            --packages-select "${packages[@]}" --pytest-args -p no:cacheprovider "$@" || {
+                code=$?
+                [ "$code" -ge 124 ] && echo "error: colcon test stopped after" \
+                    "${HELIO_TEST_TIMEOUT:-1500} s (HELIO_TEST_TIMEOUT)" >&2
+                failed=1
+            }
+    fi
+    if [ "$system" -eq 1 ]; then
+        echo "[helio] system tests (test/): nodes of several packages together" >&2
+        mkdir -p "$system_results"
+        timeout --kill-after=30 "${HELIO_TEST_TIMEOUT:-1500}" \
+            python3 -m pytest "$root/test" -p no:cacheprovider -q \
+            --junitxml="$system_results/pytest.xml" -o junit_suite_name=system_tests \
+            >&2 || {
+                code=$?
+                [ "$code" -ge 124 ] && echo "error: the system tests stopped after" \
+                    "${HELIO_TEST_TIMEOUT:-1500} s (HELIO_TEST_TIMEOUT)" >&2
+                failed=1
+            }
+    fi
+    exit "$failed"
 ) 9>"$root/.helio.lock" || status=$?
 
+result_dirs=()
 for package in "${packages[@]}"; do
-    [ -d "build/$package" ] || continue
-    colcon test-result --verbose --all --test-result-base "build/$package" 2>&1 \
+    [ -d "build/$package" ] && result_dirs+=("build/$package")
+done
+[ "$system" -eq 1 ] && [ -d "$system_results" ] && result_dirs+=("$system_results")
+for directory in "${result_dirs[@]}"; do
+    colcon test-result --verbose --all --test-result-base "$directory" 2>&1 \
         | tee -a "$report" >&2 || true
 done
 
