@@ -8,6 +8,7 @@ world keeps the true one. In one graph, in the order a painting uses them:
   non-finite target, an unreachable one, a target off the panel);
 - ``calibrate_world`` recovers the world's true T_robot_world (``sim/truth/world_pose``);
 - ``sweep_sun`` estimates the true sun (``sim/truth/sun_direction``) from the spot;
+- ``calibrate_focus`` finds the distance of the world's smallest spot (8.2 cm);
 - ``focus`` puts the world's spot centre (``sim/truth/spot_centre``, the power centre of the
   concentrated light) on canvas targets across the paper's 5 cm offset canvas;
 - a cancel mid-move stops both devices at once.
@@ -18,7 +19,7 @@ import time
 
 from conftest import graph_of_processes
 from geometry_msgs.msg import PointStamped, PoseStamped, Vector3Stamped
-from helio_msgs.action import CalibrateWorld, FocusLens, SweepSun
+from helio_msgs.action import CalibrateFocus, CalibrateWorld, FocusLens, SweepSun
 from helio_msgs.msg import DeviceStatus
 from helio_optics.node_kit.conversions import point_to_array, pose_to_matrix
 from helio_optics.node_kit.conversions import stamp_to_seconds
@@ -34,6 +35,9 @@ NODES = ('sim_world', 'dobot_driver', 'servo_driver', 'spot_detector', 'sun_esti
 TIMEOUT = 300.0
 RIG_OFFSET = (0.004, -0.003, 0.002)        # the controller's rig file is this far off [m]
 RIG_TURN = math.radians(2.0)               # and turned by this much
+# d_lp of the world's smallest spot: test_sim_calibration measures it on the world's own
+# light field (8.2 cm, 9.1 mm^2), calibrated against the paper's Fig. 10
+WORLD_SMALLEST_SPOT = 0.082
 
 
 def wrong_rig_file(tmp_path):
@@ -149,6 +153,16 @@ def test_the_sweep_finds_the_true_sun(planner):
     error = angle_deg(point_to_array(result.estimate.direction), point_to_array(truth.vector))
     print(f'against the world: {error:.3f} deg')
     assert error < 0.3
+
+
+def test_the_focal_sweep_finds_the_worlds_smallest_spot(planner):
+    # over the paper's sweep, 6.4 to 9.8 cm by 1 mm (Sec. V-A), measured only
+    response = planner.run(CalibrateFocus, 'calibrate_focus', CalibrateFocus.Goal(apply=False))
+    result = response.result
+    print(f'\n{result.message}')
+    assert result.success, result.message
+    assert result.saved_to == ''
+    assert abs(result.heating_distance - WORLD_SMALLEST_SPOT) <= 0.001
 
 
 @pytest.mark.parametrize('target', [(0.05, 0.05), (0.10, 0.05), (0.05, 0.10), (0.10, 0.10),

@@ -24,7 +24,9 @@ Beyond the paper:
   ``thermal_stale_wall`` of wall time), a dot held past ``max_heating``, a device fault or
   alarm (``dobot/status``, ``servo/status``), a cancel, or the node stopping: the lens
   retreats at once (``focus`` at the retreat distance; if the arm cannot move, the wrist
-  turns the lens off the sun) and the goal ends saying why;
+  turns the lens off the sun). A stale stream then gets ``thermal_back_timeout`` to come
+  back (the dot is heated again from the start, and the result counts it); everything
+  else ends the goal saying why;
 - **resume**: every finished dot is appended (and flushed) to the run's ``journal.jsonl``;
   the same goal sent again continues an unfinished run at its first unburnt dot, with the
   same plan, none lost and none doubled (``fresh`` starts over; ``start_index`` skips the
@@ -144,7 +146,7 @@ class PainterNode(Node):
         self.retreat_offset = declare(self, 'retreat_offset', 0.03,
                                       "Retreat delta d_lp after a dot (the paper's 3 cm) [m].",
                                       0.005, 0.2)
-        self.cooling = declare(self, 'cooling', 'window',
+        self.cooling = declare(self, 'cooling', 'paper',
                                "Before the next dot: 'paper' waits until N_p is 0; 'window' "
                                'counts N_p only near the dot and goes on at once.',
                                choices=COOLING_RULES)
@@ -158,11 +160,15 @@ class PainterNode(Node):
         self.thermal_stale = declare(
             self, 'thermal_stale', 0.5,
             'Thermal statistics older than this (node clock) while the lens is at the heating '
-            'distance: retreat and stop [s].', 0.05, 10.0)
+            'distance: retreat, wait for them, heat the dot again [s].', 0.05, 10.0)
         self.thermal_stale_wall = declare(
             self, 'thermal_stale_wall', 2.0,
             'The same on the wall clock, so a stopped /clock cannot hold the lens [s].',
             0.1, 60.0)
+        self.thermal_back_timeout = declare(
+            self, 'thermal_back_timeout', 30.0,
+            'After a stale thermal stream, wait at most this long (wall clock) for it to come '
+            'back before the painting stops [s].', 0.0, 3600.0)
         self.cloud_timeout = declare(self, 'cloud_timeout', 600.0,
                                      'Longest wait for the sun after a cloud [s].',
                                      1.0, 86400.0)
@@ -195,6 +201,7 @@ class PainterNode(Node):
         self._stats_waiters = []
         self._spot_waiters = []
         self._busy = False
+        self._thermal_interruptions = 0   # heatings broken off by a stale stream (this goal)
         self._cancel_requested = False
         self._at_heating = None            # (target, d_lp) while the lens is focused on wood
         self.create_subscription(ThermalStats, 'thermal/stats', self._on_stats, RELIABLE)
@@ -384,6 +391,7 @@ class PainterNode(Node):
             goal_handle.abort()
             return result
         self._busy, self._cancel_requested = True, False
+        self._thermal_interruptions = 0
         started, wall_started = self._now(), time.time()
         try:
             await self._paint(goal_handle, result)
@@ -558,6 +566,9 @@ class PainterNode(Node):
                            f'sun; run in {run_dir}')
         if plan.rejected:
             result.message += f'; {len(plan.rejected)} picture dots left out by the plan'
+        if self._thermal_interruptions:
+            result.message += (f'; {self._thermal_interruptions} heating(s) broken off by a '
+                               'stale thermal stream and done again')
 
     async def _paint_dot(self, goal_handle, feedback, index, target, n_p_target, cooling,
                          dry_run, result):
@@ -591,12 +602,13 @@ class PainterNode(Node):
             cycle.start_heating(self._now())
             feedback.phase = 'heating'
             decision = Decision.HEAT
+            stale = False
             while decision is Decision.HEAT:
                 stats = await self._next_stats()
                 self._check()
                 if stats is None:
-                    raise PaintFailed(f'thermal statistics stale for more than '
-                                      f'{self.thermal_stale:g} s while heating dot {index}')
+                    stale = True       # the watchdog: off the wood at once, below
+                    break
                 n_p, t_max = _readings(stats, window)
                 feedback.n_p, feedback.t_max = int(n_p), float(t_max)
                 goal_handle.publish_feedback(feedback)
@@ -606,6 +618,14 @@ class PainterNode(Node):
             if not retreat.success:
                 raise PaintFailed(f'the retreat after dot {index} failed: {retreat.message}')
             self._at_heating = None
+            if stale:
+                self.get_logger().error(
+                    f'dot {index}: thermal statistics stale for more than '
+                    f'{self.thermal_stale:g} s while heating: retreated; waiting for them')
+                await self._wait_for_thermal(index)
+                self._thermal_interruptions += 1
+                cycle.restart()
+                continue
             if decision is Decision.CLOUD:
                 self.get_logger().warning(f'dot {index}: sun lost ({cycle.cloud_reason}); '
                                           'waiting for it')
@@ -630,6 +650,18 @@ class PainterNode(Node):
             decision = cycle.update(self._now(), n_p, t_max, stats.camera_cap)
         record['end'] = self._now()
         return record
+
+    async def _wait_for_thermal(self, index):
+        """Wait (lens retreated) for fresh thermal statistics; PaintFailed after the timeout."""
+        deadline = time.monotonic() + self.thermal_back_timeout
+        while time.monotonic() < deadline:
+            stats = await self._next_stats()
+            self._check()
+            if stats is not None:
+                return
+        raise PaintFailed(f'thermal statistics stale for more than {self.thermal_stale:g} s '
+                          f'while heating dot {index}, and not back within '
+                          f'{self.thermal_back_timeout:g} s')
 
     def destroy_node(self):
         """Leave the lens off the wood if a painting is cut short (best effort)."""

@@ -2,9 +2,9 @@
 
 import math
 
-from helio_drivers.sim.flux import irradiance_on_cells, LensFlux, pmma_index
+from helio_drivers.sim.flux import irradiance_on_cells, LensFlux
 from helio_optics.geometry import homogeneous, rotation_y, unit
-from helio_optics.lens import LensParameters
+from helio_optics.lens import LensParameters, pmma_index
 import numpy as np
 import pytest
 

@@ -60,6 +60,22 @@ class ThermalStatistics:
     threshold: float    # [degC]
     camera_cap: float   # [degC]
     ignored: int = 0    # pixels that are no reading (non-finite, above the cap) [-]
+    window_n_p: int = 0            # pixels >= threshold inside the window mask [-]
+    window_t_max: float = math.nan  # hottest reading inside it [degC] (NaN: no pixel)
+
+
+def window_mask(mapping, shape, centre, radius):
+    """
+    Return the (H, W) bool mask of the pixels whose ground point lies within `radius`.
+
+    `mapping` is the thermal camera's GroundMapping at the image's pose, `centre` the world
+    (x, y) [m] of the window (the dot being heated): the painter counts N_p there only, so
+    the previous dot's afterglow does not hold the next dot back (no cooling wait).
+    """
+    height, width = shape
+    ground = mapping.grid_to_ground(np.arange(width), np.arange(height))
+    with np.errstate(invalid='ignore'):
+        return np.hypot(ground[..., 0] - centre[0], ground[..., 1] - centre[1]) <= radius
 
 
 def linear_calibration(encoding, config):
@@ -114,8 +130,12 @@ class ThermalAnalyzer:
         self.config = config or ThermalConfig()
         self._raw_thresholds = {}
 
-    def statistics(self, array, encoding):
-        """Return ThermalStatistics of a (H, W) image of the given encoding."""
+    def statistics(self, array, encoding, window=None):
+        """
+        Return ThermalStatistics of a (H, W) image of the given encoding.
+
+        `window`, a (H, W) bool mask (``window_mask``), adds N_p and T_max inside it.
+        """
         config = self.config
         if encoding not in ENCODINGS:
             raise ValueError(f'thermal images must be one of {", ".join(ENCODINGS)}, '
@@ -133,7 +153,6 @@ class ThermalAnalyzer:
             if ignored:
                 array = np.where(valid, array, -np.inf).astype(np.float32)
             level = np.float32(config.threshold - THRESHOLD_ROUNDING)
-            n_p = int(np.count_nonzero(array >= level))
         else:
             if array.dtype.kind not in 'ui' or array.dtype.itemsize != 2:
                 raise ValueError(f'{encoding} needs a 16-bit integer array, got '
@@ -143,20 +162,33 @@ class ThermalAnalyzer:
                 self._raw_thresholds[encoding] = (
                     raw_threshold(config.threshold, encoding, config),
                     raw_threshold(implausible, encoding, config) + 1)
-            at_threshold, too_hot = self._raw_thresholds[encoding]
+            level, too_hot = self._raw_thresholds[encoding]
             above = array >= too_hot
             ignored = int(np.count_nonzero(above))
             if ignored:
                 array = np.where(above, 0, array).astype(np.uint16)
-            n_p = int(np.count_nonzero(array >= at_threshold))
+        n_p = int(np.count_nonzero(array >= level))
         if ignored == array.size:
             raise ValueError(f'the {encoding} thermal image has no plausible pixel (all '
                              f'non-finite or above {implausible:g} degC)')
         _, top, _, (u, v) = cv2.minMaxLoc(array)
-        if encoding != '32FC1':
-            top = raw_to_celsius(top, encoding, config)
-        t_max = float(top)
+        t_max = self._celsius(top, encoding)
+        window_n_p, window_t_max = 0, math.nan
+        if window is not None:
+            if window.shape != array.shape:
+                raise ValueError(f'the window mask is {window.shape}, the image {array.shape}')
+            inside = array[window]
+            if inside.size:
+                window_n_p = int(np.count_nonzero(inside >= level))
+                window_t_max = self._celsius(inside.max(), encoding)
         return ThermalStatistics(
             t_max=t_max, n_p=n_p, hottest_u=int(u), hottest_v=int(v),
             saturated=bool(t_max >= config.camera_cap - config.saturation_tolerance),
-            threshold=config.threshold, camera_cap=config.camera_cap, ignored=ignored)
+            threshold=config.threshold, camera_cap=config.camera_cap, ignored=ignored,
+            window_n_p=window_n_p, window_t_max=window_t_max)
+
+    def _celsius(self, reading, encoding):
+        """Return a reading of the encoding in degC."""
+        if encoding == '32FC1':
+            return float(reading)
+        return float(raw_to_celsius(reading, encoding, self.config))

@@ -7,18 +7,25 @@ FLIR Lepton sends it, 32FC1 degC, or mono16 with a linear calibration) and
 ``JointStateBuffer``). Publishes (reliable) ``thermal/stats`` (helio_msgs/ThermalStats:
 T_max, N_p at or above T_p, the hottest pixel and, when the thermal camera's pose is known
 from the joints and the rig kinematics, the ground point it sees; saturated when T_max is at
-the camera cap) and the global ``/diagnostics`` (on wall time; ERROR when no image arrived
-for ``input_timeout`` on the node clock or ``input_wall_timeout`` of wall time, WARN for
-malformed frames or pixels that are no reading).
+the camera cap; N_p and T_max inside the window set on ``thermal/window``) and the global
+``/diagnostics`` (on wall time; ERROR when no image arrived for ``input_timeout`` on the
+node clock or ``input_wall_timeout`` of wall time, WARN for malformed frames or pixels that
+are no reading).
+
+``thermal/window`` (geometry_msgs/PointStamped, reliable, transient local; the painter
+sets it): a world-frame disc, centre (x, y) and radius in z [m], NaN to clear. While it is
+set and the camera pose is known, each ThermalStats also counts N_p and T_max within it
+(``window_*`` fields): the dot being heated only, without the previous dot's afterglow.
 
 The statistics are `helio_perception.thermal.ThermalAnalyzer`; parameters in
 config/thermal_monitor.yaml. A malformed frame is logged with its reason and skipped.
 """
 
+import math
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Point
+from geometry_msgs.msg import Point, PointStamped
 from helio_msgs.msg import ThermalStats
 from helio_optics.geometry import invert_transform
 from helio_optics.node_kit.conversions import camera_from_info, image_to_numpy
@@ -31,11 +38,12 @@ from helio_optics.node_kit.process_tuning import frozen_after_start_up
 from helio_optics.node_kit.runner import run_node
 from helio_perception.frame_statistics import FrameStatistics, InputFreshness
 from helio_perception.ground_plane import GroundMapping
-from helio_perception.thermal import ThermalAnalyzer, ThermalConfig
+from helio_perception.thermal import ThermalAnalyzer, ThermalConfig, window_mask
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
+from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
 
@@ -90,6 +98,12 @@ class ThermalMonitorNode(Node):
         self.create_subscription(CameraInfo, 'thermal/camera_info', self.on_camera_info,
                                  qos_profile_sensor_data)
         self.create_subscription(JointState, 'joint_states', self.on_joint_state, 50)
+        self.window = None           # (x, y, radius) [m] in the world frame, or None
+        self._window_mask = (None, None)   # (key, mask) of the last pose and window
+        self.create_subscription(
+            PointStamped, 'thermal/window', self.on_window,
+            QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL))
         if self.diagnostics_period > 0:
             # wall time: the node clock stops with /clock, and that must be reported too
             self.create_timer(self.diagnostics_period, self.publish_diagnostics,
@@ -102,6 +116,20 @@ class ThermalMonitorNode(Node):
         problem = self.joints.add_message(msg)
         if problem:
             self.get_logger().warn(problem, throttle_duration_sec=5.0)
+
+    def on_window(self, msg):
+        """Set (or, with NaN, clear) the N_p window: centre x, y and radius z [m], world."""
+        values = (msg.point.x, msg.point.y, msg.point.z)
+        if any(math.isnan(v) for v in values):
+            self.window = None
+        elif not all(math.isfinite(v) for v in values) or msg.point.z <= 0.0 or \
+                (msg.header.frame_id or 'world') != 'world':
+            self.get_logger().warn(f'thermal/window ignored (want a finite world point, '
+                                   f'radius z > 0, frame world): {values} in '
+                                   f'{msg.header.frame_id!r}; the window is cleared')
+            self.window = None
+        else:
+            self.window = values
 
     def on_camera_info(self, msg):
         """Keep the thermal intrinsics (for the hottest pixel's ground point)."""
@@ -119,7 +147,9 @@ class ThermalMonitorNode(Node):
         self.stats.frame(stamp)
         try:
             image = image_to_numpy(msg)
-            result = self.analyzer.statistics(image, msg.encoding)
+            mapping, key = self.ground_mapping(image.shape, stamp)
+            window = self.window_pixels(mapping, key, image.shape)
+            result = self.analyzer.statistics(image, msg.encoding, window)
         except (ImageConversionError, ValueError) as error:
             self.stats.bad_frame(str(error))
             self.get_logger().warn(f'thermal image skipped: {error}', throttle_duration_sec=2.0)
@@ -135,28 +165,46 @@ class ThermalMonitorNode(Node):
         out.t_max, out.threshold, out.n_p = result.t_max, result.threshold, result.n_p
         out.hottest_u, out.hottest_v = result.hottest_u, result.hottest_v
         out.saturated, out.camera_cap = result.saturated, result.camera_cap
-        point = self.hottest_ground_point(result.hottest_u, result.hottest_v, image.shape,
-                                          stamp)
-        if point is not None:
-            out.hottest_point_valid = True
-            out.hottest_point = Point(x=float(point[0]), y=float(point[1]), z=0.0)
+        if mapping is not None and self.locate_hottest:
+            point = mapping.pixels_to_ground([[result.hottest_u, result.hottest_v]])[0]
+            if not np.any(np.isnan(point)):
+                out.hottest_point_valid = True
+                out.hottest_point = Point(x=float(point[0]), y=float(point[1]), z=0.0)
+        if window is not None:
+            out.window_valid = True
+            out.window_n_p, out.window_t_max = result.window_n_p, result.window_t_max
+            out.window_centre = Point(x=self.window[0], y=self.window[1], z=0.0)
+            out.window_radius = self.window[2]
         self.stats_pub.publish(out)
         self.stats.result(True, milliseconds=(time.perf_counter() - started) * 1e3)
 
-    def hottest_ground_point(self, u, v, shape, stamp):
-        """Return the world ground point pixel (u, v) saw at `stamp` [s], None if unknown."""
-        if not self.locate_hottest or self.camera is None:
-            return None
-        if (self.camera.height, self.camera.width) != tuple(shape):
-            return None
+    def ground_mapping(self, shape, stamp):
+        """
+        Return (GroundMapping, key) of the thermal camera at `stamp` [s], (None, None) if unknown.
+
+        Known with the camera info (of this image size) and joint states within the tolerance;
+        the key (joints, world pose) changes when the pose does.
+        """
+        if self.camera is None or (self.camera.height, self.camera.width) != tuple(shape):
+            return None, None
         joints = self.joints.at(stamp, self.joint_state_tolerance).positions
         if joints is None:
-            return None
+            return None, None
+        T_robot_world = self.rig.parameters.T_robot_world
         pose = self.rig.forward(joints)
-        T_world_robot = invert_transform(self.rig.parameters.T_robot_world)
-        mapping = GroundMapping(self.camera, T_world_robot @ pose.T_robot_thermal)
-        point = mapping.pixels_to_ground([[u, v]])[0]
-        return None if np.any(np.isnan(point)) else point
+        mapping = GroundMapping(self.camera,
+                                invert_transform(T_robot_world) @ pose.T_robot_thermal)
+        return mapping, (np.asarray(joints).tobytes(), T_robot_world.tobytes(), id(self.camera))
+
+    def window_pixels(self, mapping, key, shape):
+        """Return the window's pixel mask at this pose (cached while still), None if unset."""
+        if self.window is None or mapping is None:
+            return None
+        key = (key, self.window)
+        if self._window_mask[0] != key:
+            self._window_mask = (key, window_mask(mapping, shape, self.window[:2],
+                                                  self.window[2]))
+        return self._window_mask[1]
 
     def publish_diagnostics(self):
         """Publish the frame counters and the input's health on /diagnostics."""

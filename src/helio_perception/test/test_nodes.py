@@ -5,7 +5,10 @@ Joint states come in two partial messages (arm from dobot_driver, wrist from ser
 stamped near each image; camera_info comes from the kit's converter.
 """
 
+import math
+
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PointStamped
 from helio_msgs.msg import SpotObservation, ThermalStats
 from helio_optics.geometry import invert_transform, transform_points
 from helio_optics.lens import LensParameters
@@ -21,6 +24,7 @@ from helio_perception.synthetic_scene import SyntheticScene
 from helio_perception.thermal_monitor_node import ThermalMonitorNode
 import numpy as np
 import pytest
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
@@ -168,6 +172,29 @@ def test_thermal_monitor_publishes_stats_with_the_hottest_ground_point(graph):
     error = np.hypot(stats.hottest_point.x - target[0], stats.hottest_point.y - target[1])
     assert error < 1.5 * footprint
     assert node.stats.malformed == 1
+    assert not stats.window_valid
+    # the painter's window (radius in z): N_p counted on the dot it names only
+    windows = graph.helper.create_publisher(PointStamped, 'thermal/window', QoSProfile(
+        depth=1, reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    for centre, radius, n_p in ((target, 0.003, 9), (target + [0.02, 0.0, 0.0], 0.003, 0),
+                                (None, math.nan, None)):
+        window = PointStamped()
+        window.header.frame_id = 'world'
+        window.point.x, window.point.y = (math.nan, math.nan) if centre is None else centre[:2]
+        window.point.z = radius
+        windows.publish(window)
+        graph.wait_until(lambda: node.window == (None if centre is None else
+                                                 (centre[0], centre[1], radius)),
+                         what='the window set')
+        feed.images.publish(msg)
+        stats = received.wait_for_count(len(received.messages) + 1)[-1]
+        assert stats.n_p == 9
+        if centre is None:
+            assert not stats.window_valid
+        else:
+            assert stats.window_valid and stats.window_n_p == n_p
+            assert stats.window_radius == radius and stats.window_centre.x == centre[0]
 
 
 def test_the_quality_constants_are_the_message_constants():

@@ -1,7 +1,12 @@
 """Thermal statistics against direct counts on synthetic Lepton-like frames."""
 
+import math
+
+from helio_optics.geometry import PinholeCamera
 from helio_optics.node_kit.conversions import image_to_numpy, numpy_to_image
+from helio_perception.ground_plane import GroundMapping
 from helio_perception.thermal import raw_threshold, ThermalAnalyzer, ThermalConfig
+from helio_perception.thermal import window_mask
 import numpy as np
 import pytest
 
@@ -153,3 +158,47 @@ def test_a_reading_exactly_at_t_p_counts_for_every_decimal_threshold(encoding):
         if stats.n_p != 1:
             missed.append((threshold, stats.n_p))
     assert not missed, missed[:5]
+
+
+def looking_down(height=0.15, width_px=160, height_px=120, fov=math.radians(57.0)):
+    """Return (camera, GroundMapping) of a thermal camera `height` [m] over the origin."""
+    camera = PinholeCamera.from_fov(width_px, height_px, fov)
+    T_world_camera = np.diag([1.0, -1.0, -1.0, 1.0])     # optical z down onto z = 0
+    T_world_camera[2, 3] = height
+    return camera, GroundMapping(camera, T_world_camera)
+
+
+def test_the_window_holds_the_pixels_of_its_disc_on_the_ground():
+    camera, mapping = looking_down()
+    radius, centre = 0.005, (0.01, -0.02)
+    mask = window_mask(mapping, (120, 160), centre, radius)
+    # analytic: a pixel covers (h / f)^2 of ground straight below; the disc is pi r^2
+    pixel = 0.15 / camera.matrix[0, 0]
+    expected = math.pi * radius ** 2 / pixel ** 2
+    assert abs(np.count_nonzero(mask) - expected) <= 0.08 * expected
+    # and it sits where the camera sees the centre
+    u, v = camera.project(np.array([[centre[0], -centre[1], 0.15]]))[0]
+    rows, cols = np.nonzero(mask)
+    assert abs(cols.mean() - u) < 0.5 and abs(rows.mean() - v) < 0.5
+
+
+def test_n_p_in_the_window_leaves_out_the_previous_dots_afterglow():
+    camera, mapping = looking_down()
+    raw = np.full((120, 160), 29815, np.uint16)              # 25 degC
+    previous = camera.project(np.array([[0.0, 0.0, 0.15]]))[0].round().astype(int)
+    current = camera.project(np.array([[0.012, 0.0, 0.15]]))[0].round().astype(int)
+    raw[previous[1] - 1:previous[1] + 2, previous[0] - 1:previous[0] + 2] = CAP_RAW  # 9 px
+    raw[current[1], current[0]:current[0] + 2] = CAP_RAW - 2000                      # 2 px
+    raw[current[1] + 1, current[0]] = CAP_RAW                                        # 1 px
+    analyzer = ThermalAnalyzer()
+    window = window_mask(mapping, raw.shape, (0.012, 0.0), 0.004)
+    result = analyzer.statistics(raw, '16UC1', window)
+    assert result.n_p == 10 and result.window_n_p == 1
+    assert result.t_max == pytest.approx(180.9) and \
+        result.window_t_max == pytest.approx(180.9)
+    cooler = analyzer.statistics(np.where(raw == CAP_RAW, CAP_RAW - 1000, raw), '16UC1', window)
+    assert cooler.window_n_p == 0 and cooler.window_t_max == pytest.approx(170.9)
+    # no window: no window figures; a mask of another size is refused
+    assert math.isnan(analyzer.statistics(raw, '16UC1').window_t_max)
+    with pytest.raises(ValueError, match='window mask'):
+        analyzer.statistics(raw, '16UC1', window[:-1])

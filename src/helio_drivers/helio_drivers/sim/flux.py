@@ -20,21 +20,12 @@ from dataclasses import dataclass, replace
 import math
 
 from helio_optics.geometry import invert_transform
-from helio_optics.lens import area_samples, LensParameters, trace
+from helio_optics.lens import area_samples, LensParameters, pmma_index, SOLAR_BANDS, trace
 import numpy as np
 
-# PMMA refractive index, Cauchy fit to 1.4914 (587.6 nm), 1.502 (437 nm), 1.489 (633 nm).
-CAUCHY_A = 1.4799
-CAUCHY_B = 0.00434  # [um^2]
-# Direct solar spectrum (AM1.5 direct) shares of the power acrylic passes, by band:
-# (centre wavelength [um], fraction of the transmitted power).
-DEFAULT_BANDS = ((0.45, 0.17), (0.55, 0.18), (0.65, 0.16), (0.80, 0.22), (1.00, 0.15),
-                 (1.30, 0.12))
-
-
-def pmma_index(wavelength_um):
-    """Refractive index of acrylic at `wavelength_um` (Cauchy fit)."""
-    return CAUCHY_A + CAUCHY_B / wavelength_um ** 2
+# The world's lens is acrylic in sunlight: the optics core's PMMA index (Cauchy fit) and the
+# direct solar spectrum's bands, so the world and the controller's focus model are one model.
+DEFAULT_BANDS = SOLAR_BANDS
 
 
 @dataclass

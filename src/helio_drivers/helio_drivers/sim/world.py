@@ -90,6 +90,29 @@ class CharredDot:
     area: float       # [m^2]
 
 
+def charred_dots_of(mask, origin, cell, minimum_area=0.05e-6):
+    """
+    Return the CharredDots of a char mask: connected regions, centroid and size (world).
+
+    `mask` (rows from y_min) is true where the wood is charred, `origin` the world (x, y) of
+    its corner [m], `cell` its pixel side [m]; regions under `minimum_area` [m^2] are left
+    out. A subscriber of ``sim/canvas`` (row 0 at y_max) flips it first.
+    """
+    count, _, stats, centroids = cv2.connectedComponentsWithStats(
+        np.asarray(mask).astype(np.uint8), connectivity=8)
+    dots = []
+    for label in range(1, count):
+        area = stats[label, cv2.CC_STAT_AREA] * cell * cell
+        if area < minimum_area:
+            continue
+        column, row = centroids[label]
+        dots.append(CharredDot(x=float(origin[0] + (column + 0.5) * cell),
+                               y=float(origin[1] + (row + 0.5) * cell),
+                               diameter=float(2.0 * math.sqrt(area / math.pi)),
+                               area=float(area)))
+    return dots
+
+
 def settings_from_flat(flat, base=None):
     """
     Build SimSettings from flat names ('dni', 'wood.density', 'lens.aperture_diameter', ...).
@@ -306,20 +329,8 @@ class SimWorld:
 
     def charred_dots(self, minimum_area=0.05e-6):
         """Return the CharredDots: connected charred regions, centroid and size (world)."""
-        mask = self.panel.charred_mask().astype(np.uint8)
-        count, _, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
-        cell = self.panel.grid.fine_cell
-        dots = []
-        for label in range(1, count):
-            area = stats[label, cv2.CC_STAT_AREA] * cell * cell
-            if area < minimum_area:
-                continue
-            column, row = centroids[label]
-            dots.append(CharredDot(x=float(self.panel.raster_origin[0] + (column + 0.5) * cell),
-                                   y=float(self.panel.raster_origin[1] + (row + 0.5) * cell),
-                                   diameter=float(2.0 * math.sqrt(area / math.pi)),
-                                   area=float(area)))
-        return dots
+        return charred_dots_of(self.panel.charred_mask(), self.panel.raster_origin,
+                               self.panel.grid.fine_cell, minimum_area)
 
     def write_outputs(self, directory):
         """Write canvas.png (the char map) and dots.csv (ground truth); return their paths."""
