@@ -132,7 +132,8 @@ def test_paint_starts_the_simulated_graph_paints_reports_and_stops_all_of_it(tmp
     assert leftovers.stdout.strip() == ''
 
 
-def test_ctrl_c_during_paint_stops_the_graph_it_started_and_exits_130(tmp_path):
+@pytest.mark.parametrize('stop', [signal.SIGINT, signal.SIGTERM], ids=['ctrl_c', 'sigterm'])
+def test_ctrl_c_during_paint_stops_the_graph_it_started_and_exits_130(tmp_path, stop):
     run = tmp_path / 'run'
     process = subprocess.Popen(
         HELIO + ['paint', 'sample:logo', '--connect-timeout', '1', '--start-timeout', '120',
@@ -145,7 +146,7 @@ def test_ctrl_c_during_paint_stops_the_graph_it_started_and_exits_130(tmp_path):
     # the graph's node processes start (their parameter files name the log folder)
     wait_for(lambda: subprocess.run(['pgrep', '-f', str(logs)], capture_output=True,
                                     text=True).stdout.split(), 120.0, 'a node process')
-    process.send_signal(signal.SIGINT)
+    process.send_signal(stop)      # a terminal's Ctrl-C, or a supervisor's SIGTERM
     rest = process.stderr.read()
     assert process.wait(120) == 130, rest
     assert 'Traceback' not in rest

@@ -21,6 +21,7 @@ import argparse
 import datetime
 import math
 import os
+import signal
 import sys
 import tempfile
 import threading
@@ -367,6 +368,8 @@ class PaintSession:
                             f' within {self.arguments.connect_timeout:g} s (start one with '
                             '"helio sim" or "helio rig", or leave out --no-start)')
                     self._start_graph()
+                    if hasattr(goal, 'fresh'):
+                        goal.fresh = True     # a new simulated panel: nothing is burnt yet
                     if not client.wait_for_server(timeout_sec=self.arguments.start_timeout):
                         self._graph_check()
                         raise CommandError(
@@ -568,6 +571,22 @@ def build_parser(action_type=None):
     return parser
 
 
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _stop_signals_interrupt():
+    """
+    Make SIGINT, SIGTERM and SIGHUP a KeyboardInterrupt: Ctrl-C's path for all three.
+
+    That path cancels the goal (the lens retreats) and stops every process helio started;
+    Python's default SIGTERM would end helio at once and leave them running. SIGINT is set
+    too because a shell starting helio in the background hands it SIGINT ignored.
+    """
+    for name in ('SIGINT', 'SIGTERM', 'SIGHUP'):
+        signal.signal(getattr(signal, name), _interrupt)
+
+
 def main(args=None):
     """Run ``helio``; return the exit status."""
     args = sys.argv[1:] if args is None else list(args)
@@ -577,6 +596,7 @@ def main(args=None):
         PaintPattern = None     # noqa: N806 - paint then explains
     parser = build_parser(PaintPattern)
     arguments = parser.parse_args(args)       # exits 2 on bad usage
+    _stop_signals_interrupt()
     try:
         if arguments.command == 'paint' and PaintPattern is None:
             raise CommandError('helio_msgs is not installed (is the workspace sourced?)')

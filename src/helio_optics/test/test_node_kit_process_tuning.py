@@ -1,11 +1,15 @@
-"""Tests of the process-wide settings for frame-handling nodes (glibc malloc, gc.freeze)."""
+"""Tests of the nodes' process-wide settings (glibc malloc, gc.freeze, one-thread numerics)."""
 
 import gc
+import json
+import os
 import resource
+import subprocess
+import sys
 import weakref
 
 from helio_optics.node_kit.process_tuning import (
-    frozen_after_start_up, keep_large_buffers, MMAP_THRESHOLD_MAX)
+    frozen_after_start_up, keep_large_buffers, MMAP_THRESHOLD_MAX, single_threaded_numerics)
 import numpy as np
 import pytest
 
@@ -83,3 +87,46 @@ def test_garbage_from_before_building_is_collected_not_frozen():
         assert alive() is None
     finally:
         gc.unfreeze()
+
+
+def test_numerics_are_pinned_to_one_thread_here_and_in_libraries_loaded_later():
+    # a fresh interpreter: numpy loaded first (as a console script does), SciPy after
+    script = (
+        'import numpy, json\n'
+        'from helio_optics.node_kit.process_tuning import single_threaded_numerics\n'
+        'single_threaded_numerics()\n'
+        'import os, scipy.linalg, cv2\n'
+        'from threadpoolctl import threadpool_info\n'
+        'print(json.dumps({"pools": [p["num_threads"] for p in threadpool_info()],\n'
+        '                  "opencv": cv2.getNumThreads(),\n'
+        '                  "omp": os.environ["OMP_NUM_THREADS"]}))\n')
+    done = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+    figures = json.loads(done.stdout)
+    assert figures['pools'] and set(figures['pools']) == {1}
+    assert figures['opencv'] == 1 and figures['omp'] == '1'
+
+
+def test_a_real_node_process_logs_its_numerics_on_one_thread(tmp_path):
+    from ament_index_python.packages import get_package_prefix
+    executable = os.path.join(get_package_prefix('helio_optics'), 'lib', 'helio_optics',
+                              'sun_estimator')
+    process = subprocess.Popen([executable, '--ros-args', '-r', '__ns:=/numerics_test'],
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        line = ''
+        for line in process.stdout:
+            if 'numeric thread pools' in line:
+                break
+        pools = line.split('numeric thread pools: ', 1)[1].strip().split(', ')
+        assert pools and all(pool.rsplit(' ', 1)[1] == '1' for pool in pools), line
+        assert any(pool.startswith('opencv') for pool in pools)
+    finally:
+        process.terminate()
+        process.wait(30)
+
+
+def test_a_thread_count_below_one_is_refused():
+    with pytest.raises(ValueError, match='>= 1'):
+        single_threaded_numerics(0)

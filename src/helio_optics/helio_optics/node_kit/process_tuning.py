@@ -10,6 +10,10 @@ with 640x480 rgb8 images at 30 Hz (README, "End-to-end latency"):
   in again: about 560 minor faults and 1.3 ms per frame in the node. `keep_large_buffers`
   raises glibc's mmap and trim thresholds (mallopt) so that freed buffers stay mapped and
   are reused.
+- Numeric thread pools. numpy's BLAS (OpenBLAS) and OpenCV start one worker per core; on
+  two shared cores the world's heat solver and the nodes' frame work then fight each other
+  (a heat step 15-28 ms instead of 3 ms under load), and multi-thread BLAS results differ
+  in the last bits from run to run. `single_threaded_numerics` pins them to one thread.
 - Start-up objects. After imports (rclpy, numpy, OpenCV, SciPy) the collector tracks about
   60 000 objects; a full (generation 2) collection walks them all, about 35 ms here.
   `frozen_after_start_up` collects once after the node is built and moves the survivors to
@@ -21,6 +25,7 @@ No rclpy import: the nodes' main() call these, tests call them directly.
 
 import ctypes
 import gc
+import os
 
 M_TRIM_THRESHOLD = -1  # mallopt parameters, glibc's malloc.h
 M_MMAP_THRESHOLD = -3
@@ -68,3 +73,35 @@ def frozen_after_start_up(factory):
     build.__name__ = getattr(factory, '__name__', 'build')
     build.__doc__ = f'Build {build.__name__}, then collect and freeze the start-up objects.'
     return build
+
+
+THREAD_VARIABLES = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS',
+                    'BLIS_NUM_THREADS', 'NUMEXPR_NUM_THREADS', 'VECLIB_MAXIMUM_THREADS')
+
+
+def single_threaded_numerics(threads=None):
+    """
+    Pin numpy's BLAS/OpenMP pools and OpenCV to `threads` (HELIO_NUMERIC_THREADS, else 1).
+
+    Three layers, because a console script has imported numpy before main() runs: the
+    pools already loaded are limited through threadpoolctl; the environment variables
+    cover libraries loaded later and child processes; OpenCV's own pool is set directly.
+    Return {library: threads} as threadpoolctl then reports it (plus 'opencv').
+    """
+    if threads is None:
+        threads = int(os.environ.get('HELIO_NUMERIC_THREADS', '1'))
+    if threads < 1:
+        raise ValueError(f'numeric threads must be >= 1, got {threads}')
+    for name in THREAD_VARIABLES:
+        os.environ[name] = str(threads)
+    from threadpoolctl import threadpool_info, threadpool_limits
+    threadpool_limits(limits=threads)
+    pools = {f"{pool['internal_api']}:{os.path.basename(pool['filepath'])}": pool['num_threads']
+             for pool in threadpool_info()}
+    try:
+        import cv2
+    except ImportError:
+        return pools
+    cv2.setNumThreads(threads)
+    pools['opencv'] = cv2.getNumThreads()
+    return pools

@@ -1,5 +1,6 @@
 """The main() of every helio node: spin one node until shutdown, then clean up."""
 
+from helio_optics.node_kit.process_tuning import single_threaded_numerics
 import rclpy
 from rclpy.executors import ExternalShutdownException
 
@@ -13,11 +14,18 @@ def run_node(node_class, args=None):
     with the node's message. A Ctrl-C or SIGTERM that arrives while the node is still being
     constructed shuts the context down under it (its next create_* call fails): that is a
     normal stop, not an error. rclpy is shut down even when destroy_node() raises.
+
+    Numeric libraries run on one thread (`single_threaded_numerics`), set before the node is
+    built and again after (a library its constructor loaded); the node logs the pools.
     """
+    single_threaded_numerics()
     rclpy.init(args=args)
     node = None
     try:
         node = node_class()
+        pools = single_threaded_numerics()
+        node.get_logger().info('numeric thread pools: ' + ', '.join(
+            f'{name} {count}' for name, count in sorted(pools.items())))
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
