@@ -64,7 +64,12 @@ def record_graph(tmp_path, stats_to_wait_for, kill=False):
                             log_dir=str(tmp_path / 'logs'), chunk_period=0.5,
                             env=node_environment()).start()
         try:
-            stats.wait_for_count(stats_to_wait_for, 120.0)
+            # counted from when the recorder hears thermal/stats (the test's own
+            # subscription is the other one): the world may run far ahead of its start-up
+            recorder.start_wait(60.0)
+            graph.wait_until(lambda: graph.helper.count_subscribers('/thermal/stats') >= 2,
+                             60.0, 'the recorder subscribing to thermal/stats')
+            stats.wait_for_count(len(stats.messages) + stats_to_wait_for, 120.0)
         finally:
             last_clock = stamp_to_nanoseconds(clock.messages[-1].clock)
             if kill:

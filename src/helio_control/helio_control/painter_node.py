@@ -603,12 +603,23 @@ class PainterNode(Node):
             feedback.phase = 'heating'
             decision = Decision.HEAT
             stale = False
+            blind_since = None         # window rule: since when the window had no figures
             while decision is Decision.HEAT:
                 stats = await self._next_stats()
                 self._check()
                 if stats is None:
                     stale = True       # the watchdog: off the wood at once, below
                     break
+                if window and not stats.window_valid:
+                    # no thermal camera pose for this image: its N_p would be the whole
+                    # image's (the last dot's afterglow too), so it is no reading; as long
+                    # as thermal_stale, and the watchdog's
+                    blind_since = self._now() if blind_since is None else blind_since
+                    if self._now() - blind_since > self.thermal_stale:
+                        stale = True
+                        break
+                    continue
+                blind_since = None
                 n_p, t_max = _readings(stats, window)
                 feedback.n_p, feedback.t_max = int(n_p), float(t_max)
                 goal_handle.publish_feedback(feedback)

@@ -2,6 +2,7 @@
 
 from helio_optics.node_kit.process_tuning import single_threaded_numerics
 import rclpy
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException
 
 
@@ -37,4 +38,18 @@ def run_node(node_class, args=None):
             if node is not None:
                 node.destroy_node()
         finally:
-            rclpy.try_shutdown()
+            _shut_down()
+
+
+def _shut_down():
+    """
+    Shut rclpy down unless it is already.
+
+    try_shutdown checks and shuts down in two steps: a SIGINT's handler shutting the context
+    down between them makes it raise "rcl_shutdown already called"; that is a clean stop.
+    """
+    try:
+        rclpy.try_shutdown()
+    except RCLError:
+        if rclpy.ok():
+            raise
