@@ -612,8 +612,8 @@ class PainterNode(Node):
                     break
                 if window and not stats.window_valid:
                     # no thermal camera pose for this image: its N_p would be the whole
-                    # image's (the last dot's afterglow too), so it is no reading; as long
-                    # as thermal_stale, and the watchdog's
+                    # image's (the last dot's afterglow too), so it is no reading; no
+                    # reading for longer than thermal_stale is a stale stream (watchdog)
                     blind_since = self._now() if blind_since is None else blind_since
                     if self._now() - blind_since > self.thermal_stale:
                         stale = True
