@@ -183,8 +183,11 @@ class ThermalMonitorNode(Node):
         Return (GroundMapping, key) of the thermal camera at `stamp` [s], (None, None) if unknown.
 
         Known with the camera info (of this image size) and joint states within the tolerance;
-        the key (joints, world pose) changes when the pose does.
+        the key (joints, world pose, intrinsics) changes when the pose does. Not made when
+        nothing needs it (no hottest point asked, no window set).
         """
+        if not (self.locate_hottest or self.window is not None):
+            return None, None
         if self.camera is None or (self.camera.height, self.camera.width) != tuple(shape):
             return None, None
         joints = self.joints.at(stamp, self.joint_state_tolerance).positions
@@ -194,7 +197,10 @@ class ThermalMonitorNode(Node):
         pose = self.rig.forward(joints)
         mapping = GroundMapping(self.camera,
                                 invert_transform(T_robot_world) @ pose.T_robot_thermal)
-        return mapping, (np.asarray(joints).tobytes(), T_robot_world.tobytes(), id(self.camera))
+        # by value: every camera_info message makes a new camera object
+        intrinsics = (np.asarray(self.camera.matrix).tobytes(),
+                      np.asarray(self.camera.distortion).tobytes())
+        return mapping, (np.asarray(joints).tobytes(), T_robot_world.tobytes(), intrinsics)
 
     def window_pixels(self, mapping, key, shape):
         """Return the window's pixel mask at this pose (cached while still), None if unset."""
