@@ -3,7 +3,7 @@
 import datetime
 import math
 
-from helio_drivers.sim.clock import Pacer, SimClock
+from helio_drivers.sim.clock import Lockstep, Pacer, SimClock
 from helio_drivers.sim.sun import CloudCover, CloudInterval, RandomClouds, Sun
 from helio_optics.ephemeris import Site
 from helio_optics.geometry import homogeneous, rotation_z
@@ -130,3 +130,27 @@ def test_pacer_holds_the_real_time_factor_and_reports_it():
     assert pacer.delay(100.2, 1.0) == 0.0
     assert pacer.achieved(100.2, 2.0) == pytest.approx(10.0)
     assert Pacer(real_time_factor=0.0).delay(5.0, 3.0) == 0.0
+
+
+def test_a_new_real_time_factor_paces_from_the_present_on():
+    pacer = Pacer(real_time_factor=0.0)
+    assert pacer.delay(100.0, 0.0) == 0.0 and pacer.delay(100.1, 50.0) == 0.0
+    pacer.set_real_time_factor(2.0)
+    assert pacer.delay(100.1, 50.0) == 0.0          # anchored now, not at the start
+    assert pacer.delay(100.1, 51.0) == pytest.approx(0.5)
+    assert pacer.achieved(101.1, 52.0) == pytest.approx(52.0 / 1.1)
+
+
+def test_lockstep_holds_the_world_at_most_lead_ahead_of_its_consumer_and_not_forever():
+    lockstep = Lockstep(lead=0.35, timeout=1.0)
+    assert not lockstep.hold(100.0, 0.0)           # no consumer yet: free running
+    lockstep.seen(10.0, wall_now=5.0)
+    assert not lockstep.hold(10.35, 5.1)           # within the lead
+    assert lockstep.hold(10.36, 5.1)               # ahead of it: wait
+    lockstep.seen(9.0, wall_now=5.2)               # a late answer does not move it back
+    assert lockstep.hold(10.36, 5.3)
+    assert not lockstep.hold(10.36, 6.3)           # silent for more than 1 s wall: go on
+    lockstep.seen(10.3, wall_now=6.4)              # answering again: held again
+    assert lockstep.hold(10.7, 6.5) and not lockstep.hold(10.6, 6.5)
+    with pytest.raises(ValueError):
+        Lockstep(lead=0.0)

@@ -82,3 +82,40 @@ def test_config_file_documents_every_world_setting_with_the_code_defaults():
                 assert value == pytest.approx(default), name
             else:
                 assert value == default, name
+
+
+def test_clouds_and_unplugged_cables_are_set_at_run_time_and_the_rest_is_refused(tmp_path):
+    from rclpy.parameter import Parameter
+    with InProcessGraph('probe') as graph:
+        node = graph.add(SimWorldNode(**graph.node_options(
+            real_time_factor=20.0, dobot_port=str(tmp_path / 'dobot'),
+            servo_port=str(tmp_path / 'servo'), rig_file=default_rig_file(), flux_rays=5000,
+            rgb_rate=0.0)))
+        clock = graph.collect(Clock, '/clock', QoSProfile(depth=10))
+        clock.wait_for_count(2, timeout=60.0)
+        clear = node.world.dni_now()
+        assert clear > 0.0
+        now = node.world.time
+        dark = [now, now + 1e4, 0.0]
+        result, = node.set_parameters([Parameter('cloud_schedule', value=dark)])
+        assert result.successful, result.reason
+        count = len(clock.messages)
+        clock.wait_for_count(count + 3, timeout=60.0)       # a few steps later: dark
+        assert node.world.dni_now() == 0.0
+        result, = node.set_parameters([Parameter('cloud_schedule', value=[now, now + 1.0])])
+        assert not result.successful and 'triples' in result.reason
+        result, = node.set_parameters([Parameter('cloud_schedule', value=[0.0, 0.0, 1.0])])
+        assert not result.successful, 'end > start is checked'
+        # an unplugged cable: the port's link goes away (the driver's open fails), and back
+        result, = node.set_parameters([Parameter('unplugged', value=['dobot'])])
+        assert result.successful, result.reason
+        assert not (tmp_path / 'dobot').exists() and (tmp_path / 'servo').exists()
+        result, = node.set_parameters([Parameter('unplugged', value=['dobot', 'arm'])])
+        assert not result.successful and "unknown device(s) ['arm']" in result.reason
+        result, = node.set_parameters([Parameter('unplugged', value=[''])])
+        assert result.successful and (tmp_path / 'dobot').exists()
+        result, = node.set_parameters([Parameter('real_time_factor', value=0.0)])
+        assert result.successful and node._pacer.real_time_factor == 0.0
+        result, = node.set_parameters([Parameter('dni', value=500.0)])
+        assert not result.successful and 'read-only' in result.reason
+        assert node.world.sun.dni == clear

@@ -11,6 +11,7 @@ reports the factor achieved.
 """
 
 import datetime
+import math
 import threading
 
 
@@ -75,10 +76,16 @@ class Pacer:
         self._first_wall = None
         self._first_sim = 0.0
 
+    def set_real_time_factor(self, real_time_factor):
+        """Pace at a new factor from the next step on (the achieved figure keeps counting)."""
+        self.real_time_factor = float(real_time_factor)
+        self._wall0 = None
+
     def delay(self, wall_now, sim_now):
         """Return the wall seconds to wait before simulating past `sim_now` (0: step now)."""
         if self._wall0 is None:
             self._wall0, self._sim0 = wall_now, sim_now
+        if self._first_wall is None:
             self._first_wall, self._first_sim = wall_now, sim_now
         if self.real_time_factor <= 0.0:
             return 0.0
@@ -93,3 +100,35 @@ class Pacer:
         if self._first_wall is None or wall_now <= self._first_wall:
             return 0.0
         return (sim_now - self._first_sim) / (wall_now - self._first_wall)
+
+
+class Lockstep:
+    """
+    Keep a world that runs faster than real time from outrunning its slowest consumer.
+
+    The consumer's outputs carry the simulated stamp of the input they answer (e.g.
+    ``thermal/stats`` for each thermal image). ``hold`` says to wait while the world is more
+    than `lead` simulated seconds ahead of the newest such stamp, as a robot's real sensors
+    never run ahead of its software. A consumer silent for `timeout` wall seconds (stopped,
+    crashed, not started) is left behind until it answers again, so it cannot freeze the
+    world.
+    """
+
+    def __init__(self, lead=0.2, timeout=1.0):
+        """Allow `lead` [s simulated] ahead; give up on a consumer after `timeout` [s wall]."""
+        if not (lead > 0.0 and timeout > 0.0):
+            raise ValueError(f'lockstep lead and timeout must be > 0, got {lead}, {timeout}')
+        self.lead, self.timeout = float(lead), float(timeout)
+        self._stamp = None
+        self._heard = -math.inf
+
+    def seen(self, stamp, wall_now):
+        """Note a consumer output answering the input stamped `stamp` [s simulated]."""
+        self._stamp = stamp if self._stamp is None else max(self._stamp, stamp)
+        self._heard = wall_now
+
+    def hold(self, sim_now, wall_now):
+        """Return whether the world should wait before simulating past `sim_now` [s]."""
+        if self._stamp is None or wall_now - self._heard > self.timeout:
+            return False
+        return sim_now - self._stamp > self.lead

@@ -241,10 +241,25 @@ class SimWorld:
         """Return the direct normal irradiance now, clouds included [W/m^2]."""
         return self._dni
 
+    def peak_irradiance(self):
+        """Return the highest irradiance on a cell of the heat patch now [W/m^2] (0 before)."""
+        if self._unit_irradiance is None:
+            return 0.0
+        return float(self._dni * np.max(self._unit_irradiance))
+
     @property
     def flux_field(self):
         """Return the FluxField (per unit DNI) of the present lens pose."""
         return self._field
+
+    def set_cloud_schedule(self, flat):
+        """Replace the cloud schedule (flat start_s, end_s, attenuation triples) from now on.
+
+        The random clouds of the settings stay; ValueError for a malformed schedule.
+        """
+        settings = replace(self.settings, cloud_schedule=tuple(float(v) for v in flat))
+        self.sun.clouds = settings.cloud_cover()
+        self.settings = settings
 
     # ------------------------------------------------------------------ dynamics
     def _refresh(self):

@@ -18,9 +18,30 @@ and publishes:
   true T_robot_world) and ``spot_centre`` (geometry_msgs/PointStamped, world frame: the
   power centre of the concentrated light on the panel, NaN when the lens focuses nothing);
   ``rgb_pose`` (geometry_msgs/PoseStamped, world frame: the true pose of the rgb optical
-  frame, with each RGB image and its stamp).
+  frame, with each RGB image and its stamp); ``light`` (helio_msgs/LightTruth: the light's
+  power centre, the peak irradiance on the panel and the DNI, to tell whether the focus is
+  on the wood).
   No controller node subscribes to them: the controller must find the sun and the marker
   itself (a test enforces that).
+
+Set while it runs (``ros2 param set``), to play the outer edge of the world in tests and demos;
+every other parameter is read-only after start:
+
+- ``cloud_schedule``: the flat (start_s, end_s, attenuation) triples, simulated seconds since
+  the start, replace the schedule (e.g. a complete cloud from now for 30 s);
+- ``real_time_factor``: the pace from the next step on (e.g. as fast as possible through a
+  long heating, real time to watch a retreat);
+- ``unplugged``: device names (``dobot``, ``servo``) whose USB cable is out: their
+  pseudo-terminal is closed and its link removed, as on an unplug; taking a name out plugs
+  it back in (a new pty behind the same path).
+
+Lockstep: a world faster than real time holds its simulated time at most ``lockstep_lead``
+ahead of the newest stamp on ``lockstep_topic`` (``thermal/stats``: the thermal monitor's
+answer to each thermal image), as real sensors never run ahead of the software reading
+them; otherwise, on 2 busy cores, the painter's fire-safety watchdog (0.5 s of simulated
+time without thermal data) would trip on a world that merely ran ahead. A consumer silent
+for ``lockstep_timeout`` of wall time is left behind, so a stopped one cannot freeze the
+world.
 
 Topic names are relative, so the world runs under a namespace with its rig's nodes.
 At shutdown it writes ``canvas.png`` and ``dots.csv`` into ``output_dir`` (if set).
@@ -30,15 +51,17 @@ import threading
 import time
 
 from geometry_msgs.msg import PointStamped, PoseStamped, Vector3, Vector3Stamped
-from helio_drivers.sim.clock import Pacer
+from helio_drivers.sim.clock import Lockstep, Pacer
 from helio_drivers.sim.devices import DeviceSettings, SimDevices
 from helio_drivers.sim.world import flat_settings, settings_from_flat, SimSettings, SimWorld
+from helio_msgs.msg import LightTruth, ThermalStats
 from helio_optics.node_kit.conversions import array_to_point, camera_info_from_camera
 from helio_optics.node_kit.conversions import matrix_to_pose, numpy_to_image
 from helio_optics.node_kit.deployment import rig_file_or_default, RIG_FILE_PARAMETER
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
 from helio_optics.rig_kinematics import load_rig_parameters
+from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
@@ -138,6 +161,9 @@ PARAMETER_DOCS = {
 class SimWorldNode(Node):
     """Thin node around SimWorld and SimDevices; see the module docstring."""
 
+    # the parameters that can change at run time
+    RUNTIME = ('cloud_schedule', 'unplugged', 'real_time_factor')
+
     def __init__(self, **kwargs):
         """Declare parameters, build the world and the devices, start the stepping thread."""
         super().__init__('sim_world', **kwargs)
@@ -147,7 +173,8 @@ class SimWorldNode(Node):
         self.settings = settings_from_flat(flat)
         self.real_time_factor = declare(
             self, 'real_time_factor', 1.0,
-            'simulated seconds per wall second (0: as fast as possible)', 0.0, 1000.0)
+            'simulated seconds per wall second (0: as fast as possible)', 0.0, 1000.0,
+            dynamic=True)
         self.rgb_rate = declare(self, 'rgb_rate', 5.0, 'RGB frame rate [Hz sim]', 0.0, 120.0)
         self.thermal_rate = declare(self, 'thermal_rate', 8.7,
                                     'thermal frame rate [Hz sim]', 0.0, 120.0)
@@ -200,10 +227,33 @@ class SimWorldNode(Node):
                                                      TRUTH_QOS)
         self.truth_spot_pub = self.create_publisher(PointStamped, 'sim/truth/spot_centre',
                                                     TRUTH_QOS)
+        self.truth_light_pub = self.create_publisher(LightTruth, 'sim/truth/light', TRUTH_QOS)
         self.truth_rgb_pub = self.create_publisher(PoseStamped, 'sim/truth/rgb_pose',
                                                    TRUTH_QOS)
+        self.unplugged = declare(
+            self, 'unplugged', [''],
+            "Devices whose cable is out ('dobot', 'servo'); set at run time to unplug and "
+            'plug back in.', dynamic=True)
+        self._plug(self.unplugged)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         self._next = {'rgb': 0.0, 'thermal': 0.0, 'canvas': 0.0, 'truth': 0.0}
         self._pacer = Pacer(self.real_time_factor)
+        lockstep_topic = declare(
+            self, 'lockstep_topic', 'thermal/stats',
+            'helio_msgs/ThermalStats topic answering each thermal image: the world runs at '
+            'most lockstep_lead ahead of its newest stamp, so a world faster than real time '
+            "never outruns the graph's perception ('' : off)")
+        self._lockstep = Lockstep(
+            declare(self, 'lockstep_lead', 0.2,
+                    'How far the world may run ahead of lockstep_topic [s simulated]',
+                    0.05, 60.0),
+            declare(self, 'lockstep_timeout', 1.0,
+                    'A lockstep_topic silent this long is left behind [s wall]', 0.05, 60.0))
+        self._lockstep_heard = threading.Event()
+        if lockstep_topic:
+            self.create_subscription(
+                ThermalStats, lockstep_topic, self._on_lockstep,
+                QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         self._stop = threading.Event()
         self.achieved_real_time_factor = 0.0
         self.step_errors = 0
@@ -212,14 +262,58 @@ class SimWorldNode(Node):
 
     def _declare(self, name, default):
         description, minimum, maximum = PARAMETER_DOCS.get(name, (name, None, None))
+        dynamic = name in self.RUNTIME
         if isinstance(default, (list, bool, str)):
-            return declare(self, name, default, description)
-        return declare(self, name, default, description, minimum, maximum)
+            return declare(self, name, default, description, dynamic=dynamic)
+        return declare(self, name, default, description, minimum, maximum, dynamic=dynamic)
+
+    # ------------------------------------------------------------------ run-time controls
+
+    def _on_set_parameters(self, parameters):
+        """Apply the run-time controls; refuse a change to anything fixed at start."""
+        # declarations pass here too; a set of a read-only parameter never does (rclpy)
+        for parameter in parameters:
+            try:
+                if parameter.name == 'cloud_schedule':
+                    self.world.set_cloud_schedule(parameter.value)
+                elif parameter.name == 'real_time_factor':
+                    self.real_time_factor = float(parameter.value)
+                    self._pacer.set_real_time_factor(self.real_time_factor)
+                elif parameter.name == 'unplugged':
+                    self._plug(parameter.value)
+            except ValueError as error:
+                return SetParametersResult(successful=False, reason=str(error))
+        return SetParametersResult(successful=True)
+
+    def _plug(self, unplugged):
+        """Unplug the named devices and plug the others back in (ValueError: unknown name)."""
+        names = {name for name in unplugged if name}
+        devices = {'dobot': self.devices.dobot, 'servo': self.devices.servo}
+        unknown = names - set(devices)
+        if unknown:
+            raise ValueError(f'unplugged: unknown device(s) {sorted(unknown)}; the devices are '
+                             f'{sorted(devices)}')
+        for name, device in devices.items():
+            if name in names and device.connected:
+                device.disconnect()
+                self.get_logger().warning(f'{name} unplugged at {self.world.time:.2f} s')
+            elif name not in names and not device.connected:
+                device.reconnect()
+                self.get_logger().info(f'{name} plugged back in at {self.world.time:.2f} s')
 
     # ------------------------------------------------------------------ loop
+    def _on_lockstep(self, message):
+        self._lockstep.seen(message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec,
+                            time.monotonic())
+        self._lockstep_heard.set()
+
     def _run(self):
         """Step the world at the real-time factor and publish what is due."""
         while not self._stop.is_set():
+            if self._lockstep.hold(self.world.clock.nanoseconds() * 1e-9, time.monotonic()):
+                self._lockstep_heard.wait(0.01)      # woken by the consumer's next output
+                self._lockstep_heard.clear()
+                continue
             delay = self._pacer.delay(time.monotonic(), self.world.time)
             if delay > 0.0 and self._stop.wait(delay):
                 break
@@ -292,6 +386,12 @@ class SimWorldNode(Node):
         centre = None if field is None else field.centroid()
         spot.point = array_to_point([float('nan')] * 3 if centre is None else [*centre, 0.0])
         self.truth_spot_pub.publish(spot)
+        light = LightTruth()
+        light.header = spot.header
+        light.centre = spot.point
+        light.peak_irradiance = self.world.peak_irradiance()
+        light.dni = float(self.world.dni_now())
+        self.truth_light_pub.publish(light)
 
     def stop(self):
         """Stop stepping, write the outputs if asked, close the devices."""
