@@ -11,20 +11,25 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 @contextlib.contextmanager
 def graph_of_processes(tmp_path, nodes, overrides=None, namespace='',
-                       client_name='system_test_client'):
+                       client_name='system_test_client', may_die=()):
     """
     Start the simulated graph's `nodes` as processes and yield (ProcessGroup, client graph).
 
     The client graph (an InProcessGraph in the test's process, same namespace) fails every
-    wait at once when a node process dies, naming it with its last log lines. Everything
-    is stopped on exit (SIGINT, then SIGTERM, then SIGKILL).
+    wait at once when a node process dies, naming it with its last log lines, except the
+    nodes named in `may_die` (a test that kills one). Everything is stopped on exit
+    (SIGINT, then SIGTERM, then SIGKILL).
     """
     specs = simulated_graph(str(tmp_path / 'ports'), nodes, overrides)
+
+    def on_death(process):
+        if process.label not in may_die:
+            client.fail(f'{process.label} exited with status {process.returncode()}; '
+                        f'last log lines:\n{process.tail()}')
+
     with InProcessGraph(client_name, namespace=namespace) as client:
         group = start_graph(specs, namespace, log_dir=str(tmp_path / 'logs'),
-                            on_death=lambda process: client.fail(
-                                f'{process.label} exited with status {process.returncode()}; '
-                                f'last log lines:\n{process.tail()}'))
+                            on_death=on_death)
         try:
             yield group, client
         finally:

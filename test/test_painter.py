@@ -106,13 +106,16 @@ def test_the_window_rule_paints_faster_than_the_papers_with_dots_as_even(paintin
         errors = [math.hypot(d.x - t.x, d.y - t.y) for d, t in zip(charred, targets)]
         diameters = np.array([d.diameter for d in charred])
         spreads[rule] = float(np.std(diameters) / np.mean(diameters))
-        print(f'{rule} rule: {cycles[rule]:.1f} s per dot (sim), placement error mean '
+        print(f'{rule} rule: {cycles[rule]:.1f} s per dot (sim), dwell '
+              f'{np.mean([d.dwell for d in dots]):.1f} s, placement error mean '
               f'{np.mean(errors) * 1e3:.3f} mm, max {np.max(errors) * 1e3:.3f} mm, diameter '
               f'{np.mean(diameters) * 1e3:.2f} mm, CV {spreads[rule] * 100:.1f} %')
         assert np.mean(errors) <= 0.3e-3
     saved = 1.0 - cycles['window'] / cycles['paper']
     print(f'the window rule saves {saved * 100:.0f} % per dot')
-    # Issue 13 asks for 15 %. Here the paper's wait for N_p = 0 is about 2.7 s of a 21 s
-    # cycle (15 s heating, 3 s of moves), so the saving measures 13-14 %: short of it.
+    # Issue 13 asks for 15 %. Here the paper's rule spends ~5 s per dot beside the heating
+    # (retreat, the wait for N_p = 0, travel, approach), the window rule ~1.9 s (its move to
+    # the next dot starts with the retreat); the heating, ~17 s of a ~22 s cycle, is the
+    # same for both, so the saving measures 13-14 %: short of it.
     assert saved >= 0.10
     assert spreads['window'] <= max(spreads['paper'], 0.10)

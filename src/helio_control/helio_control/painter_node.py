@@ -11,8 +11,9 @@ Per goal (paper Sec. IV-B and IV-C, Algorithm 1):
    else the parameter); hold while N_p < the dot's target (``dot_cycle``); retreat by delta
    d_lp; with the paper's cooling rule wait until N_p is back to 0, with the ``window``
    rule count N_p only within ``window_radius`` of the dot (``thermal/window``: the previous
-   dot's afterglow does not count) and go on at once; the sun estimate follows the sun by
-   Eq 18 (``sun_estimator`` republishes it).
+   dot's afterglow does not count) and go on at once (the move to the next dot is one
+   ``focus`` goal that starts with the retreat, so the arm does not stop in between);
+   the sun estimate follows the sun by Eq 18 (``sun_estimator`` republishes it).
 
 Beyond the paper:
 
@@ -212,6 +213,7 @@ class PainterNode(Node):
         for device in ('dobot', 'servo'):
             self.create_subscription(DeviceStatus, f'{device}/status', self._on_status, LATCHED)
         self.heard = {}                    # device -> wall time of its last joint state
+        self.wrist_now = {}                # the servos' latest joint positions [rad]
         self.create_subscription(JointState, 'joint_states', self._on_joints, 20)
         self.window_publisher = self.create_publisher(PointStamped, 'thermal/window', LATCHED)
         self.focus = ActionClient(self, FocusLens, 'focus')
@@ -253,6 +255,8 @@ class PainterNode(Node):
     def _on_joints(self, message):
         device = 'servo' if 'lens_pitch' in message.name else 'dobot'
         self.heard[device] = time.monotonic()
+        if device == 'servo':
+            self.wrist_now = dict(zip(message.name, message.position))
 
     def _silent_devices(self):
         """Return the drivers whose joint states stopped (wall clock), as sentences."""
@@ -267,7 +271,11 @@ class PainterNode(Node):
         elif message.alarms:
             problem = f'{message.device} alarm: {", ".join(message.alarms)}'
         if problem:
+            new = message.device not in self.faults
             self.faults[message.device] = problem
+            if new:
+                for waiter in list(self._stats_waiters):
+                    waiter.offer(None)      # wake the heating loop: it retreats at once
         else:
             self.faults.pop(message.device, None)
 
@@ -324,19 +332,27 @@ class PainterNode(Node):
         if self._at_heating is None:
             return 'the lens was not at the heating distance'
         target, d_lp = self._at_heating
+        arm_fault = self.faults.get('dobot') or next(
+            (silent for silent in self._silent_devices() if silent.startswith('dobot')), None)
+        if arm_fault:                     # the arm cannot move: straight to the wrist
+            failure = arm_fault
+        else:
+            try:
+                result = await self._focus(target, d_lp + self.retreat_offset)
+                if result.success:
+                    self._at_heating = None
+                    return f'retreated ({why})'
+                failure = result.message
+            except PaintFailed as error:
+                failure = str(error)
+        # the arm cannot move: tilt the lens off the sun with the wrist, from where it is,
+        # away from the pitch servo's nearer end (the lens axis leaves the sun ray)
         try:
-            result = await self._focus(target, d_lp + self.retreat_offset)
-            if result.success:
-                self._at_heating = None
-                return f'retreated ({why})'
-            failure = result.message
-        except PaintFailed as error:
-            failure = str(error)
-        # the arm cannot move: turn the lens off the sun with the wrist
-        try:
-            pitch = float(self.wrist_turn)
+            yaw = float(self.wrist_now.get('lens_yaw', 0.0))
+            pitch = float(self.wrist_now.get('lens_pitch', 0.0))
+            pitch += -self.wrist_turn if pitch > 0.0 else self.wrist_turn
             result = await self._run_action(self.wrist, 'move_wrist',
-                                            MoveWrist.Goal(yaw=0.0, pitch=pitch))
+                                            MoveWrist.Goal(yaw=yaw, pitch=pitch))
             if result.success:
                 self._at_heating = None
                 return f'the arm could not retreat ({failure}); the wrist turned the lens away'
@@ -392,7 +408,18 @@ class PainterNode(Node):
             return result
         self._busy, self._cancel_requested = True, False
         self._thermal_interruptions = 0
-        started, wall_started = self._now(), time.time()
+        wall_started = time.time()
+        try:
+            # under use_sim_time the clock reads 0 until the first /clock arrives: every
+            # duration of the run would be counted from 1970
+            await discovered(self, lambda: self._now() > 0.0, self.server_timeout,
+                             'the clock (/clock, with use_sim_time)')
+        except TimeoutError as error:
+            self._busy = False
+            result.message = str(error)
+            goal_handle.abort()
+            return result
+        started = self._now()
         try:
             await self._paint(goal_handle, result)
             if result.success:
@@ -550,6 +577,10 @@ class PainterNode(Node):
                 failed += 1
             else:
                 result.dots_skipped += 1
+        if self._at_heating is not None:              # the window rule's last dot
+            retreated = await self._retreat('the painting is done')
+            if not retreated.startswith('retreated'):
+                raise PaintFailed(f'after the last dot: {retreated}')
         feedback.phase, feedback.index = 'done', len(plan.dots)
         goal_handle.publish_feedback(feedback)
         if goal.dry_run:
@@ -596,6 +627,8 @@ class PainterNode(Node):
             goal_handle.publish_feedback(feedback)
             moved = await self._focus(target, d_heat)
             if not moved.success:
+                if self._at_heating is not None:      # the last dot's heating pose
+                    self.get_logger().warning(await self._retreat('the move failed'))
                 record.update(end=self._now(), outcome='failed', reason=moved.message)
                 return record
             self._at_heating = (target, d_heat)
@@ -625,6 +658,12 @@ class PainterNode(Node):
                 goal_handle.publish_feedback(feedback)
                 record['t_max'] = max(record['t_max'], float(t_max))
                 decision = cycle.update(self._now(), n_p, t_max, stats.camera_cap)
+            if window and decision is Decision.RETREAT:
+                # the window rule moves on at once: the move to the next dot begins with
+                # the retreat along the sun ray (lens_moves), so no separate retreat here;
+                # after the last dot, or when anything stops the painting, _paint retreats
+                decision = cycle.update(self._now(), n_p, t_max, stats.camera_cap)
+                break
             retreat = await self._focus(target, d_heat + self.retreat_offset)
             if not retreat.success:
                 raise PaintFailed(f'the retreat after dot {index} failed: {retreat.message}')

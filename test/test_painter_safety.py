@@ -1,0 +1,309 @@
+"""
+The painter when things go wrong, in the whole simulated graph (every node its own process).
+
+Issue 13's cases, each started in the middle of a dot's heating and judged by the simulated
+world's ground truth (``sim/truth/light``: the peak irradiance the lens puts on the panel,
+and ``sim/canvas``: the char map), never by what the painter says about itself:
+
+- a complete 30 s cloud (``cloud_schedule`` set on ``sim_world`` at run time) is waited out
+  and the dot is finished to its N_p target;
+- a stale thermal stream (``thermal_monitor`` stopped with SIGSTOP), an unplugged Dobot
+  (``unplugged`` on ``sim_world``: its pty closes as on a USB unplug) and a cancel each put
+  the focus off the wood within 0.5 s of simulated time;
+- the painter killed (SIGKILL) mid-painting and the same goal sent again to a new painter
+  completes the picture with no dot lost and none burnt twice.
+
+The world runs as fast as it can between the events and at real time (factor 1) around
+each, so that the measured reaction is the graph's and not the pace of the simulation.
+"""
+
+import math
+import signal
+
+from conftest import graph_of_processes
+from geometry_msgs.msg import Point
+from helio_control.run_journal import read_journal
+from helio_drivers.sim.world import charred_dots_of, SimSettings
+from helio_msgs.action import PaintPattern
+from helio_msgs.msg import DeviceStatus, LightTruth, ThermalStats
+from helio_optics.node_kit.conversions import image_to_numpy
+from helio_optics.node_kit.in_process_graph import TRANSIENT_LOCAL_QOS
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Image
+
+NODES = ('sim_world', 'dobot_driver', 'servo_driver', 'spot_detector', 'thermal_monitor',
+         'sun_estimator', 'lens_planner', 'painter')
+TIMEOUT = 900.0
+PITCH = 0.008                 # between dots [m]: outside each other's hot region
+# Rows at world y >= 0.07: below it, at this sun, the servo yaw limit forces the wrist branch
+# whose thermal camera grazes the panel from 3 cm up, where N_p (a pixel count) stays ~12.
+OFF_BOUND = 0.5               # issue 13: focus off the wood within this [s of sim time]
+# The focus is off the wood when the peak irradiance on the panel is below this share of
+# the peak while heating (the 3 cm retreat spreads the light over ~20x the area).
+OFF_SHARE = 0.25
+THERMAL_STALE = 0.5           # the painter's default thermal_stale [s]
+
+
+def dots_along(y, count):
+    """Return `count` world points along x at height y [m]."""
+    return [Point(x=0.05 + i * PITCH, y=y, z=0.0) for i in range(count)]
+
+
+def stamp_s(stamp):
+    """Return a builtin_interfaces/Time as seconds."""
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
+class Rig:
+    """The test's handles on the running graph: the world's controls and truths, /paint."""
+
+    def __init__(self, group, graph, runs):
+        """Subscribe to the truths and the devices; connect to /paint."""
+        self.group, self.graph, self.runs = group, graph, runs
+        self.world = AsyncParameterClient(graph.helper, 'sim_world')
+        self.clock = graph.collect(Clock, '/clock', QoSProfile(depth=10))
+        self.light = graph.collect(LightTruth, 'sim/truth/light',
+                                   QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE))
+        self.stats = graph.collect(ThermalStats, 'thermal/stats', QoSProfile(depth=50))
+        self.dobot = graph.collect(DeviceStatus, 'dobot/status', TRANSIENT_LOCAL_QOS)
+        self.canvas = graph.collect(Image, 'sim/canvas', QoSProfile(depth=1))
+        self.client = graph.action_client(PaintPattern, 'paint', 120.0)
+        settings = SimSettings()
+        self.start = settings.start_datetime().timestamp()     # the world's time zero
+        self.origin = (settings.panel_extent[0], settings.panel_extent[2])
+        self.cell = settings.grid.fine_cell
+
+    def process(self, label):
+        """Return the NodeProcess of the node `label`."""
+        return next(p for p in self.group.processes if p.label == label)
+
+    def set_world(self, **values):
+        """Set sim_world parameters at run time; fail on a refusal."""
+        self.graph.wait_until(self.world.services_are_ready, 60.0, 'sim_world parameters')
+        response = self.graph.on_executor(
+            lambda: self.world.set_parameters([Parameter(k, value=v) for k, v in values.items()]),
+            60.0, 'the parameter response')
+        for name, result in zip(values, response.results):
+            assert result.successful, f'{name}: {result.reason}'
+
+    def now(self):
+        """Return the latest simulated time seen on /clock (epoch seconds)."""
+        self.clock.wait_for_count(1, 60.0)
+        return stamp_s(self.clock.messages[-1].clock)
+
+    def wait_sim(self, seconds):
+        """Wait until /clock has advanced by `seconds` of simulated time."""
+        until = self.now() + seconds
+        self.clock.wait_until(lambda m: m and stamp_s(m[-1].clock) >= until, 60.0,
+                              f'/clock to pass {seconds} s further')
+
+    def send(self, points, name, fresh=True, on_feedback=None):
+        """Send a PaintPattern goal for `points`; return its accepted handle."""
+        goal = PaintPattern.Goal(points=points, fresh=fresh, run_dir=str(self.runs / name)
+                                 if name else '')
+        handle = self.graph.send_goal(self.client, goal, on_feedback, 60.0)
+        assert handle.accepted
+        return handle
+
+    def heating(self, index=0, n_p=5):
+        """Return (feedback callback, event set once dot `index` heats with N_p >= n_p)."""
+        import threading
+        event = threading.Event()
+
+        def on_feedback(message):
+            feedback = message.feedback
+            if feedback.phase == 'heating' and feedback.index == index and feedback.n_p >= n_p:
+                event.set()
+        return on_feedback, event
+
+    def wait(self, event, what):
+        """Wait for `event` (set by a feedback callback), at most TIMEOUT."""
+        assert event.wait(TIMEOUT), f'{what} did not happen within {TIMEOUT} s'
+
+    def heating_peak(self):
+        """Return the highest peak irradiance on the panel seen so far [W/m^2]."""
+        return max(m.peak_irradiance for m in self.light.messages)
+
+    def off_after(self, since, reference):
+        """Return the first sim time after `since` at which the focus is off the wood."""
+        def off(messages):
+            return any(stamp_s(m.header.stamp) >= since
+                       and m.peak_irradiance < OFF_SHARE * reference for m in messages)
+        self.light.wait_until(off, 60.0, 'the focus off the wood')
+        first = next(m for m in self.light.messages if stamp_s(m.header.stamp) >= since
+                     and m.peak_irradiance < OFF_SHARE * reference)
+        return stamp_s(first.header.stamp), first.peak_irradiance / reference
+
+    def charred_dots(self):
+        """Return the world's charred dots from a sim/canvas image published after now."""
+        already = len(self.canvas.messages)
+        image = image_to_numpy(self.canvas.wait_for_count(already + 1, 60.0)[already])
+        return charred_dots_of(np.flipud(image) <= 127, self.origin, self.cell)
+
+
+@pytest.fixture(scope='module')
+def rig(tmp_path_factory):
+    """Run the whole graph once for the module; the painter may be killed by a test."""
+    tmp_path = tmp_path_factory.mktemp('safety')
+    overrides = {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000,
+                               'canvas_rate': 1.0, 'truth_period': 0.05},
+                 'lens_planner': {'calibration_dir': str(tmp_path / 'calibration')},
+                 'painter': {'runs_dir': str(tmp_path / 'runs')}}
+    with graph_of_processes(tmp_path, NODES, overrides, may_die=('painter',)) as (group, graph):
+        yield Rig(group, graph, tmp_path / 'runs')
+
+
+def nearest(dots, target, radius=1.5e-3):
+    """Return the charred dot nearest `target` within `radius` [m], or None."""
+    near = [d for d in dots if math.hypot(d.x - target.x, d.y - target.y) <= radius]
+    return min(near, key=lambda d: math.hypot(d.x - target.x, d.y - target.y), default=None)
+
+
+def test_a_30_s_cloud_mid_dot_is_waited_out_and_the_dot_finished_to_its_target(rig):
+    targets = dots_along(0.07, 2)
+    on_feedback, mid_dot = rig.heating(index=0, n_p=15)
+    handle = rig.send(targets, 'cloud', on_feedback=on_feedback)
+    rig.wait(mid_dot, 'dot 0 half way to its N_p target')
+    now = rig.now() - rig.start
+    rig.set_world(cloud_schedule=[now, now + 30.0, 0.0])    # complete: no direct sun
+    result = rig.graph.goal_result(handle, TIMEOUT).result
+    print(f'\ncloud: {result.message}')
+    assert result.success, result.message
+    assert result.dots_burnt == 2 and 25.0 <= result.cloud_wait <= 60.0
+    dots = read_journal(str(rig.runs / 'cloud' / 'journal.jsonl')).dots
+    assert [d.outcome for d in dots] == ['burnt', 'burnt']
+    assert dots[0].peak_n_p >= dots[0].n_p_target
+    charred = [nearest(rig.charred_dots(), t) for t in targets]
+    assert all(dot is not None for dot in charred), 'a dot is not charred'
+    diameters = [dot.diameter for dot in charred]
+    print(f'cloud: dot under the cloud {diameters[0] * 1e3:.2f} mm, clear one '
+          f'{diameters[1] * 1e3:.2f} mm')
+    assert diameters[0] == pytest.approx(diameters[1], rel=0.15)
+
+
+def _painting_interrupted(rig, name, y, interrupt):
+    """Start a one-dot painting, interrupt it at real time; return (off delay, handle)."""
+    on_feedback, heating = rig.heating(index=0, n_p=5)
+    handle = rig.send(dots_along(y, 1), name, on_feedback=on_feedback)
+    rig.wait(heating, f'{name}: dot 0 heating')
+    rig.set_world(real_time_factor=1.0)
+    try:
+        rig.wait_sim(0.3)                          # paced from here on
+        reference = rig.heating_peak()
+        since = interrupt()
+        off, share = rig.off_after(since, reference)
+    finally:
+        rig.set_world(real_time_factor=0.0)
+    print(f'\n{name}: focus off the wood {off - since:.2f} s (sim) after it, peak '
+          f'irradiance down to {share * 100:.1f} % of the heating peak')
+    return off - since, handle
+
+
+def test_a_stale_thermal_stream_puts_the_focus_off_the_wood_within_half_a_second(rig):
+    thermal = rig.process('thermal_monitor')
+
+    def stop_thermal():
+        thermal.signal(signal.SIGSTOP)
+        rig.wait_sim(1.5 * THERMAL_STALE)
+        rig.stats.wait_for_count(1, 60.0)
+        last = stamp_s(rig.stats.messages[-1].header.stamp)
+        return last + THERMAL_STALE                  # stale from here on (the watchdog)
+
+    try:
+        delay, handle = _painting_interrupted(rig, 'stale', 0.08, stop_thermal)
+    finally:
+        thermal.signal(signal.SIGCONT)
+    assert delay <= OFF_BOUND
+    result = rig.graph.goal_result(handle, TIMEOUT).result    # it comes back: heated again
+    print(f'stale: {result.message}')
+    assert result.success and 'stale thermal stream' in result.message, result.message
+
+
+def test_an_unplugged_dobot_puts_the_focus_off_the_wood_within_half_a_second(rig):
+    def unplug():
+        since = rig.now()
+        rig.set_world(unplugged=['dobot'])
+        return since
+
+    try:
+        delay, handle = _painting_interrupted(rig, 'unplug', 0.09, unplug)
+        result = rig.graph.goal_result(handle, TIMEOUT).result
+    finally:
+        rig.set_world(unplugged=[''])
+    print(f'unplug: {result.message}')
+    assert delay <= OFF_BOUND
+    assert not result.success and 'dobot' in result.message
+    assert 'wrist turned the lens away' in result.message
+    connected = len(rig.dobot.messages)
+    rig.dobot.wait_until(lambda m: len(m) > connected and m[-1].connected, 60.0,
+                         'the Dobot connected again')
+
+
+def test_a_cancel_puts_the_focus_off_the_wood_within_half_a_second(rig):
+    handles = []
+
+    def cancel():
+        since = rig.now()
+        response = rig.graph.cancel_goal(handles[0], 60.0)
+        assert response.goals_canceling, 'the cancel was refused'
+        return since
+
+    on_feedback, heating = rig.heating(index=0, n_p=5)
+    handles.append(rig.send(dots_along(0.10, 1), 'cancel', on_feedback=on_feedback))
+    rig.wait(heating, 'cancel: dot 0 heating')
+    rig.set_world(real_time_factor=1.0)
+    try:
+        rig.wait_sim(0.3)
+        reference = rig.heating_peak()
+        since = cancel()
+        off, share = rig.off_after(since, reference)
+    finally:
+        rig.set_world(real_time_factor=0.0)
+    response = rig.graph.goal_result(handles[0], TIMEOUT)
+    print(f'\ncancel: focus off the wood {off - since:.2f} s (sim) after it ({share * 100:.1f}'
+          f' %); {response.result.message}')
+    assert off - since <= OFF_BOUND
+    assert response.result.message.startswith('canceled: retreated')
+
+
+def test_a_killed_painter_resumes_with_no_dot_lost_or_burnt_twice(rig):
+    targets = dots_along(0.11, 4)
+    painter = rig.process('painter')
+    on_feedback, third_dot = rig.heating(index=2, n_p=10)
+    rig.send(targets, 'killed', on_feedback=on_feedback)
+    rig.wait(third_dot, 'dot 2 heating')
+    # Nothing can retreat the lens of a killed painter: the world nearly stops meanwhile
+    # (0.01 s per wall second), or dot 2 would burn on through the restart.
+    rig.set_world(real_time_factor=0.01)
+    try:
+        painter.signal(signal.SIGKILL)
+        painter.process.wait(30.0)
+        # a request sent before the new server matched would be lost: the old one must be
+        # gone from the graph first (DDS notices a killed participant within its lease)
+        rig.graph.wait_until(lambda: not rig.client.server_is_ready(), 120.0,
+                             'the killed painter gone from the graph')
+        painter.start()                           # a new painter, the same parameters
+        rig.graph.wait_until(rig.client.server_is_ready, 120.0, 'the new painter')
+    finally:
+        rig.set_world(real_time_factor=0.0)
+    handle = rig.send(targets, '', fresh=False)   # the same goal: resume
+    result = rig.graph.goal_result(handle, TIMEOUT).result
+    print(f'\nresume: {result.message}')
+    assert result.success, result.message
+    assert result.dots_resumed == 2 and result.dots_burnt == 2
+    burnt = [d.index for d in read_journal(str(rig.runs / 'killed' / 'journal.jsonl')).dots
+             if d.outcome == 'burnt']
+    burnt += [d.index for d in read_journal(result.run_dir + '/journal.jsonl').dots
+              if d.outcome == 'burnt']
+    assert sorted(burnt) == [0, 1, 2, 3], f'burnt per journal: {burnt}'
+    charred = rig.charred_dots()
+    found = [nearest(charred, t) for t in targets]
+    assert all(dot is not None for dot in found), 'a planned dot is not charred'
+    row = [d for d in charred if abs(d.y - 0.11) < 2e-3]
+    assert len(row) == 4, f'{len(row)} charred dots on the row, 4 planned'
+    print('resume: diameters ' + ', '.join(f'{d.diameter * 1e3:.2f}' for d in found) + ' mm')
