@@ -20,6 +20,7 @@ each, so that the measured reaction is the graph's and not the pace of the simul
 import math
 import signal
 
+from action_msgs.msg import GoalStatus
 from conftest import graph_of_processes
 from geometry_msgs.msg import Point
 from helio_control.run_journal import read_journal
@@ -34,7 +35,7 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import Image, JointState
 
 NODES = ('sim_world', 'dobot_driver', 'servo_driver', 'spot_detector', 'thermal_monitor',
          'sun_estimator', 'lens_planner', 'painter')
@@ -47,6 +48,7 @@ OFF_BOUND = 0.5               # issue 13: focus off the wood within this [s of s
 # the peak while heating (the 3 cm retreat spreads the light over ~20x the area).
 OFF_SHARE = 0.25
 THERMAL_STALE = 0.5           # the painter's default thermal_stale [s]
+ENDED = (GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED)
 
 
 def dots_along(y, count):
@@ -71,6 +73,7 @@ class Rig:
                                    QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE))
         self.stats = graph.collect(ThermalStats, 'thermal/stats', QoSProfile(depth=50))
         self.dobot = graph.collect(DeviceStatus, 'dobot/status', TRANSIENT_LOCAL_QOS)
+        self.joints = graph.collect(JointState, 'joint_states', QoSProfile(depth=50))
         self.canvas = graph.collect(Image, 'sim/canvas', QoSProfile(depth=1))
         self.client = graph.action_client(PaintPattern, 'paint', 120.0)
         settings = SimSettings()
@@ -121,9 +124,12 @@ class Rig:
                 event.set()
         return on_feedback, event
 
-    def wait(self, event, what):
-        """Wait for `event` (set by a feedback callback), at most TIMEOUT."""
-        assert event.wait(TIMEOUT), f'{what} did not happen within {TIMEOUT} s'
+    def wait(self, event, what, handle):
+        """Wait for `event` (set by a feedback callback) while the goal of `handle` runs."""
+        self.graph.wait_until(lambda: event.is_set() or handle.status in ENDED, TIMEOUT, what)
+        if not event.is_set():
+            result = self.graph.goal_result(handle, 60.0).result
+            raise AssertionError(f'the goal ended before {what}: {result.message}')
 
     def heating_peak(self):
         """Return the highest peak irradiance on the panel seen so far [W/m^2]."""
@@ -168,7 +174,7 @@ def test_a_30_s_cloud_mid_dot_is_waited_out_and_the_dot_finished_to_its_target(r
     targets = dots_along(0.07, 2)
     on_feedback, mid_dot = rig.heating(index=0, n_p=15)
     handle = rig.send(targets, 'cloud', on_feedback=on_feedback)
-    rig.wait(mid_dot, 'dot 0 half way to its N_p target')
+    rig.wait(mid_dot, 'dot 0 half way to its N_p target', handle)
     now = rig.now() - rig.start
     rig.set_world(cloud_schedule=[now, now + 30.0, 0.0])    # complete: no direct sun
     result = rig.graph.goal_result(handle, TIMEOUT).result
@@ -190,7 +196,7 @@ def _painting_interrupted(rig, name, y, interrupt):
     """Start a one-dot painting, interrupt it at real time; return (off delay, handle)."""
     on_feedback, heating = rig.heating(index=0, n_p=5)
     handle = rig.send(dots_along(y, 1), name, on_feedback=on_feedback)
-    rig.wait(heating, f'{name}: dot 0 heating')
+    rig.wait(heating, f'{name}: dot 0 heating', handle)
     rig.set_world(real_time_factor=1.0)
     try:
         rig.wait_sim(0.3)                          # paced from here on
@@ -239,9 +245,14 @@ def test_an_unplugged_dobot_puts_the_focus_off_the_wood_within_half_a_second(rig
     assert delay <= OFF_BOUND
     assert not result.success and 'dobot' in result.message
     assert 'wrist turned the lens away' in result.message
+    # plugged back in: the driver reconnects and its joint states flow again (the painter
+    # refuses to paint while a driver is silent)
     connected = len(rig.dobot.messages)
     rig.dobot.wait_until(lambda m: len(m) > connected and m[-1].connected, 60.0,
                          'the Dobot connected again')
+    heard = len(rig.joints.messages)
+    rig.joints.wait_until(lambda m: any('dobot_j1' in j.name for j in m[heard:]), 60.0,
+                          "the Dobot's joint states again")
 
 
 def test_a_cancel_puts_the_focus_off_the_wood_within_half_a_second(rig):
@@ -255,7 +266,7 @@ def test_a_cancel_puts_the_focus_off_the_wood_within_half_a_second(rig):
 
     on_feedback, heating = rig.heating(index=0, n_p=5)
     handles.append(rig.send(dots_along(0.10, 1), 'cancel', on_feedback=on_feedback))
-    rig.wait(heating, 'cancel: dot 0 heating')
+    rig.wait(heating, 'cancel: dot 0 heating', handles[0])
     rig.set_world(real_time_factor=1.0)
     try:
         rig.wait_sim(0.3)
@@ -275,8 +286,8 @@ def test_a_killed_painter_resumes_with_no_dot_lost_or_burnt_twice(rig):
     targets = dots_along(0.11, 4)
     painter = rig.process('painter')
     on_feedback, third_dot = rig.heating(index=2, n_p=10)
-    rig.send(targets, 'killed', on_feedback=on_feedback)
-    rig.wait(third_dot, 'dot 2 heating')
+    first = rig.send(targets, 'killed', on_feedback=on_feedback)
+    rig.wait(third_dot, 'dot 2 heating', first)
     # Nothing can retreat the lens of a killed painter: the world nearly stops meanwhile
     # (0.01 s per wall second), or dot 2 would burn on through the restart.
     rig.set_world(real_time_factor=0.01)

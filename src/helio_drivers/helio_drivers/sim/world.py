@@ -253,7 +253,8 @@ class SimWorld:
         return self._field
 
     def set_cloud_schedule(self, flat):
-        """Replace the cloud schedule (flat start_s, end_s, attenuation triples) from now on.
+        """
+        Replace the cloud schedule (flat start_s, end_s, attenuation triples) from now on.
 
         The random clouds of the settings stay; ValueError for a malformed schedule.
         """
