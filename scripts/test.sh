@@ -30,7 +30,7 @@ export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( (RANDOM % 100) + 100 ))}"
 
 status=0
 report="$(mktemp)"
-trap 'rm -f "$report"' EXIT
+trap 'rm -f "$report" "$report.stopped"' EXIT
 system_results="build/system_tests"
 (
     flock 9   # one test run at a time in this checkout
@@ -47,7 +47,8 @@ system_results="build/system_tests"
             --packages-select "${packages[@]}" --pytest-args -p no:cacheprovider "$@" || {
                 code=$?
                 [ "$code" -ge 124 ] && echo "error: colcon test stopped after" \
-                    "${HELIO_TEST_TIMEOUT:-1500} s (HELIO_TEST_TIMEOUT)" >&2
+                    "${HELIO_TEST_TIMEOUT:-1500} s (HELIO_TEST_TIMEOUT)" >&2 \
+                    && echo "the package tests" >> "$report.stopped"
                 failed=1
             }
     fi
@@ -60,7 +61,8 @@ system_results="build/system_tests"
             >&2 || {
                 code=$?
                 [ "$code" -ge 124 ] && echo "error: the system tests stopped after" \
-                    "${HELIO_TEST_TIMEOUT:-1500} s (HELIO_TEST_TIMEOUT)" >&2
+                    "${HELIO_TEST_TIMEOUT:-1500} s (HELIO_TEST_TIMEOUT)" >&2 \
+                    && echo "the system tests" >> "$report.stopped"
                 failed=1
             }
     fi
@@ -93,6 +95,11 @@ failed=$((errors + failures))
 passed=$((total - failed - skipped))
 line="$passed passed, $failed failed"
 [ "$skipped" -gt 0 ] && line="$line, $skipped skipped"
+if [ -s "$report.stopped" ]; then
+    # a run cut off by HELIO_TEST_TIMEOUT wrote no results: say so in the summary line
+    line="$line; stopped by the timeout, not counted: $(paste -sd, "$report.stopped")"
+    status=1
+fi
 
 if [ "$total" -eq 0 ]; then
     echo "error: no test ran" >&2
