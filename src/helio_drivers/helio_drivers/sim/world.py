@@ -22,6 +22,7 @@ from helio_drivers.sim.cameras import (light_window, RgbCamera, RgbSettings, The
                                        ThermalSettings)
 from helio_drivers.sim.clock import SimClock
 from helio_drivers.sim.flux import irradiance_on_cells, lens_pose_in_world, LensFlux
+from helio_drivers.sim.memory import keep_freed_memory
 from helio_drivers.sim.sun import CloudCover, RandomClouds, Sun
 from helio_drivers.sim.wood import GridParameters, WoodPanel, WoodParameters
 from helio_optics.ephemeris import Site
@@ -165,6 +166,7 @@ class SimWorld:
         world's clock (``SimDevices(world.clock)``) and attach their ``joint_positions`` with
         ``attach_joint_source``.
         """
+        keep_freed_memory()   # its arrays are reused, not page-faulted in (memory.py)
         self.settings = settings or SimSettings()
         s = self.settings
         if not s.step > 0.0:
