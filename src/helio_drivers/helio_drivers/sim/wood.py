@@ -533,6 +533,36 @@ class WoodPanel:
                   & (y >= self.y_edges[0]) & (y <= self.y_edges[-1]))
         return self.wood.ambient + np.where(inside, value, self.far_field[0])
 
+    def surface_sampler(self, x, y):
+        """
+        Return sample() -> the surface temperature at fixed world points (x, y) now [degC].
+
+        The interpolation weights are found once: sample() costs a gather per call. It is
+        valid while the patch stays where it is (``placement`` unchanged); it gives what
+        ``surface_temperature_at(x, y)`` gives.
+        """
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        ix, wx = bilinear_weights(self.x_centres, x)
+        iy, wy = bilinear_weights(self.y_centres, y)
+        inside = ((x >= self.x_edges[0]) & (x <= self.x_edges[-1])
+                  & (y >= self.y_edges[0]) & (y <= self.y_edges[-1]))
+        columns = len(self.x_centres)
+        corner = iy * columns + ix
+        corners = (corner, corner + 1, corner + columns, corner + columns + 1)
+        weights = (1 - wx, wx, 1 - wy, wy)
+        placement = self.placement
+
+        def sample():
+            if self.placement != placement:
+                raise RuntimeError('the patch moved: make a new surface_sampler')
+            surface = self._surface.reshape(-1)
+            low_x, high_x, low_y, high_y = weights
+            value = (low_y * (low_x * surface[corners[0]] + high_x * surface[corners[1]])
+                     + high_y * (low_x * surface[corners[2]] + high_x * surface[corners[3]]))
+            return self.wood.ambient + np.where(inside, value, self.far_field[0])
+
+        return sample
+
     def char_at(self, x, y):
         """Char fraction of the raster pixel under world points (x, y) (0 off the panel)."""
         cell = self.grid.fine_cell

@@ -180,7 +180,7 @@ class SimWorld:
                        self.T_robot_world)
         self.flux = LensFlux(s.lens, rays=s.flux_rays, seed=s.seed, beam_spread=s.beam_spread)
         self.panel = WoodPanel(s.wood, s.grid, s.panel_extent)
-        self.thermal = ThermalCamera(s.thermal)
+        self.thermal = ThermalCamera(s.thermal, seed=s.seed)
         self.rgb = RgbCamera(self.panel.extent, s.grid.fine_cell, s.rgb, s.marker_side,
                              s.marker_id, s.marker_dictionary, seed=s.seed)
         self._rng = np.random.default_rng(s.seed)
@@ -254,9 +254,10 @@ class SimWorld:
         now = self.clock()
         when = self.clock.datetime()
         if now - self._sun_ray_time >= 1.0 or self._sun_ray is None:  # pysolar ~0.4 ms/call
-            self._sun_ray = self.sun.ray_world(when)
+            position = self.sun.position(when)
+            self._sun_ray = self.sun.ray_world_of(position)
             self._sun_ray_time = now
-            self._sun_up = self.sun.position(when).elevation > 0.0
+            self._sun_up = position.elevation > 0.0
         self._dni = self.sun.dni * self.sun.clouds.attenuation(now) if self._sun_up else 0.0
         T_world_lens = lens_pose_in_world(self.T_robot_world, self.pose().T_robot_lens)
         self._field = self.flux.field(T_world_lens, self._sun_ray)

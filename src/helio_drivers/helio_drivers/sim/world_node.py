@@ -126,6 +126,8 @@ PARAMETER_DOCS = {
     'rgb.tone_curve': ("RGB tone curve: 'srgb' (webcams) or 'linear' [-]", None, None),
     'rgb.bayer': ('RGB through an RGGB Bayer mosaic and demosaicing [-]', None, None),
     'rgb.jpeg_quality': ('RGB JPEG compression quality, 1-100 (0: none) [-]', 0, 100),
+    'rgb.exact_read_out': ('RGB noise through the exact ADC and tone table, not linearised '
+                           'about each pixel (slower; Bayer sensors always) [-]', None, None),
     'thermal.width': ('thermal image width [px]', 8, 2048),
     'thermal.height': ('thermal image height [px]', 8, 2048),
     'thermal.horizontal_fov': ('thermal horizontal field of view [rad]', 0.1, 3.0),
