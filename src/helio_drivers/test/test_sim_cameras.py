@@ -249,3 +249,20 @@ def test_linearised_read_out_has_the_exact_read_outs_mean_and_noise_per_level():
     assert np.all(fast[:, :, saturated] == 255) and np.all(exact[:, :, saturated] == 255)
     # no two frames alike
     assert np.abs(fast[0] - fast[1]).mean() > 0.5
+
+
+def test_ground_light_by_homography_equals_casting_every_pixel_ray():
+    camera = RgbCamera((-0.04, 0.06, -0.04, 0.06), 2e-4, noise_free())
+    texture = camera._albedo
+    for pose in (look_at([0.02, -0.07, 0.11], [0.0, 0.0, 0.0]),
+                 look_at([0.05, 0.03, 0.09], [0.03, 0.02, 0.0], up=(0.0, 1.0, 0.0))):
+        warped = camera._radiance(pose, texture)
+        cast = camera._renderer.radiance(pose, texture, background=0.0)
+        difference = np.abs(warped - cast)
+        # both sample bilinearly at 1/32 px; they differ where that rounding differs
+        assert difference.mean() < 2e-3 and difference.max() < 0.05
+        part = camera._radiance(pose, texture, rect=(100, 50, 300, 200))
+        assert np.abs(part - warped[50:200, 100:300]).max() < 0.05
+    # a camera that sees the horizon is cast pixel by pixel
+    assert camera._texture_homography(look_at([0.0, -0.2, 0.02], [0.0, 0.3, 0.05]),
+                                      texture) is None

@@ -204,9 +204,11 @@ class NoisyReadOut:
         bend = 0.5 * np.gradient(per_code) * self.SUBCODES
         slope = per_code / self.NOISE_SCALE     # per unit of the int8 noise bank
         curve[-1], slope[-1], bend[-1] = 255.0, 0.0, 0.0    # above full scale: saturated
-        self._level = curve.astype(np.float32)
-        self._slope = slope.astype(np.float32)
-        self._bend = bend.astype(np.float32)
+        # the noise is a function of the light, so are the level and the gain: one table
+        # each, indexed by the light
+        sigma = webcam.noise_sigma(samples.astype(np.float32)).astype(float) * self.top
+        self._level = (curve + bend * sigma * sigma).astype(np.float32)
+        self._gain = (slope * sigma).astype(np.float32)
         self._last = len(curve) - 1
         self.shape = tuple(shape)
         padded = (self.FRAMES, shape[0] + self.PAD, shape[1] + self.PAD) + tuple(shape[2:])
@@ -219,16 +221,9 @@ class NoisyReadOut:
         light = np.asarray(light, dtype=np.float32)
         index = light * np.float32(self.top * self.SUBCODES)
         np.clip(index, 0.0, float(self._last), out=index)
-        index = np.rint(index).astype(np.intp)
-        sigma = self._webcam.noise_sigma(light)
-        sigma *= np.float32(self.top)                       # [ADC codes]
-        level = np.take(self._bend, index)
-        level *= sigma
-        level *= sigma
-        level += np.take(self._level, index)
-        gain = np.take(self._slope, index)
-        gain *= sigma
-        return level, gain
+        index += np.float32(0.5)
+        index = index.astype(np.intp)
+        return np.take(self._level, index), np.take(self._gain, index)
 
     def expose(self, prepared, rng=None):
         """Return the 8-bit frame of (level, gain): a random crop of the noise bank."""
@@ -350,8 +345,8 @@ class RgbCamera:
         changed = []
         if pose != self._panel_pose or self._panel is None:
             self.renders['panel'] += 1
-            self._panel = self._webcam.optics(self._renderer.radiance(
-                T_world_camera, self._albedo, background=0.0))
+            self._panel = self._webcam.optics(self._radiance(
+                T_world_camera, self._albedo))
             self._panel_pose, self._dirty = pose, []
         for r0, r1, c0, c1 in self._dirty:
             rect = self._image_rect(T_world_camera, self._raster_box_world(r0, r1, c0, c1))
@@ -359,8 +354,8 @@ class RgbCamera:
                 continue
             self.renders['panel_parts'] += 1
             wide, inner = rect
-            part = self._webcam.optics(self._renderer.radiance(
-                T_world_camera, self._albedo, background=0.0, rect=wide), wide)
+            part = self._webcam.optics(self._radiance(
+                T_world_camera, self._albedo, rect=wide), wide)
             x0, y0, x1, y1 = inner
             self._panel[y0:y1, x0:x1] = part[y0 - wide[1]:y1 - wide[1],
                                              x0 - wide[0]:x1 - wide[0]]
@@ -388,8 +383,8 @@ class RgbCamera:
         self._window_texture = GroundTexture(image=patch * self._window_change, extent=box,
                                              linear=True)
         wide, inner = rect
-        term = self._webcam.optics(self._renderer.radiance(
-            T_world_camera, self._window_texture, background=0.0, rect=wide), wide)
+        term = self._webcam.optics(self._radiance(
+            T_world_camera, self._window_texture, rect=wide), wide)
         x0, y0, x1, y1 = inner
         self._window_rect = inner
         self._window_term = term[y0 - wide[1]:y1 - wide[1], x0 - wide[0]:x1 - wide[0]].copy()
@@ -416,8 +411,8 @@ class RgbCamera:
             if inner is None:
                 continue
             wide = rect[0]
-            term = self._webcam.optics(self._renderer.radiance(
-                T_world_camera, self._window_texture, background=0.0, rect=wide), wide)
+            term = self._webcam.optics(self._radiance(
+                T_world_camera, self._window_texture, rect=wide), wide)
             x0, y0, x1, y1 = inner
             wx, wy = self._window_rect[:2]
             self._window_term[y0 - wy:y1 - wy, x0 - wx:x1 - wx] = \
@@ -449,6 +444,58 @@ class RgbCamera:
         self._prepared[0][y0:y1, x0:x1] = first
         if second is not None:
             self._prepared[1][y0:y1, x0:x1] = second
+
+    def _radiance(self, T_world_camera, texture, rect=None):
+        """
+        Return a linear texture's light per pixel (of `rect` (x0, y0, x1, y1), or all).
+
+        A pinhole camera without distortion maps the ground plane to the image by a
+        homography: one ``cv2.warpPerspective`` of the texture (no per-pixel rays, maps or
+        NaN handling: a moving camera's frame costs a third). Cameras with distortion,
+        supersampling, or pixels that look above the horizon go through
+        ``GroundRenderer.radiance``'s per-pixel rays.
+        """
+        homography = self._texture_homography(T_world_camera, texture)
+        if homography is None:
+            return self._renderer.radiance(T_world_camera, texture, background=0.0,
+                                           rect=rect)
+        x0, y0, x1, y1 = rect or (0, 0, self.camera.width, self.camera.height)
+        if x0 or y0:
+            homography = homography @ np.array([[1.0, 0.0, x0], [0.0, 1.0, y0],
+                                                [0.0, 0.0, 1.0]])
+        source = texture.linear_image()
+        channels = 1 if source.ndim == 2 else source.shape[2]
+        return cv2.warpPerspective(source, homography, (x1 - x0, y1 - y0),
+                                   flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                   borderMode=cv2.BORDER_CONSTANT,
+                                   borderValue=(0.0,) * max(channels, 1))
+
+    def _texture_homography(self, T_world_camera, texture):
+        """
+        Return the 3 x 3 map from image pixels (centres at integers) to texture pixels.
+
+        None when the camera distorts, supersamples or sees above the horizon. A pixel's
+        ray is d = R K^-1 (u, v, 1); it meets z = 0 at o - (o_z / d_z) d, so the ground
+        point is the homogeneous (o_x d_z - o_z d_x, o_y d_z - o_z d_y, d_z): linear in
+        (u, v, 1); the texture's pixel grid is affine in the ground point.
+        """
+        if self._renderer.supersample != 1 or np.any(self.camera.distortion):
+            return None
+        pose = np.asarray(T_world_camera, dtype=float)
+        rays = pose[:3, :3] @ np.linalg.inv(np.asarray(self.camera.matrix, dtype=float))
+        width, height = self.camera.width, self.camera.height
+        corners = np.array([[-0.5, -0.5, 1.0], [width - 0.5, -0.5, 1.0],
+                            [-0.5, height - 0.5, 1.0], [width - 0.5, height - 0.5, 1.0]])
+        if not np.all(corners @ rays[2] < 0.0):    # d_z affine: its sign at the corners
+            return None
+        ox, oy, oz = pose[:3, 3]
+        ground = np.stack([ox * rays[2] - oz * rays[0], oy * rays[2] - oz * rays[1], rays[2]])
+        x_min, _, _, y_max = texture.extent
+        sx, sy = texture.metres_per_pixel
+        to_texture = np.array([[1.0 / sx, 0.0, -x_min / sx - 0.5],
+                               [0.0, -1.0 / sy, y_max / sy - 0.5],
+                               [0.0, 0.0, 1.0]])
+        return to_texture @ ground
 
     def _raster_box_world(self, r0, r1, c0, c1):
         """Return the world extent (x_min, x_max, y_min, y_max) of raster rows/cols [m]."""

@@ -53,6 +53,7 @@ class SimSettings:
     lens: LensParameters = field(default_factory=lambda: LensParameters(
         focal_length=0.081, aperture_diameter=0.038, transmission=0.92))   # tuned
     flux_rays: int = 20000
+    flux_rays_moving: int = 2500         # per band while the lens keeps moving
     beam_spread: float = 0.004           # lens optical errors, Gaussian sigma [rad] (tuned)
     wood: WoodParameters = field(default_factory=WoodParameters)
     grid: GridParameters = field(default_factory=GridParameters)
@@ -178,7 +179,8 @@ class SimWorld:
         self.site = Site(s.latitude_deg, s.longitude_deg, s.elevation)
         self.sun = Sun(self.site, math.radians(s.robot_heading_deg), s.dni, s.cloud_cover(),
                        self.T_robot_world)
-        self.flux = LensFlux(s.lens, rays=s.flux_rays, seed=s.seed, beam_spread=s.beam_spread)
+        self.flux = LensFlux(s.lens, rays=s.flux_rays, seed=s.seed, beam_spread=s.beam_spread,
+                             moving_rays=s.flux_rays_moving)
         self.panel = WoodPanel(s.wood, s.grid, s.panel_extent)
         self.thermal = ThermalCamera(s.thermal, seed=s.seed)
         self.rgb = RgbCamera(self.panel.extent, s.grid.fine_cell, s.rgb, s.marker_side,
@@ -259,8 +261,10 @@ class SimWorld:
             self._sun_ray_time = now
             self._sun_up = position.elevation > 0.0
         self._dni = self.sun.dni * self.sun.clouds.attenuation(now) if self._sun_up else 0.0
+        pose_key = self._pose_key
         T_world_lens = lens_pose_in_world(self.T_robot_world, self.pose().T_robot_lens)
-        self._field = self.flux.field(T_world_lens, self._sun_ray)
+        moving = pose_key is not None and self._pose_key != pose_key   # since the last step
+        self._field = self.flux.field(T_world_lens, self._sun_ray, moving=moving)
         centroid = self._field.centroid()
         self.panel.follow(centroid)
         key = (self.flux.traces, tuple(self.panel.centre))
