@@ -50,7 +50,7 @@ import time
 from helio_drivers.sim.flux import irradiance_on_cells, lens_pose_in_world
 from helio_drivers.sim.truth import true_sun_focus_joints
 from helio_drivers.sim.world import SimSettings, SimWorld
-from helio_optics.bench_report import add_json_option, median_call_ms, report
+from helio_optics.bench_report import add_json_option, report
 from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
 from helio_optics.rig_kinematics import RigParameters
 import numpy as np

@@ -288,6 +288,18 @@ class RgbCamera:
                                           + self._char_rgb * chi)
         self._dirty.append((r0, r1, c0, c1))
 
+    def top_view(self, char):
+        """
+        Return the panel as a person sees it from above (H, W, 3) uint8 sRGB, row 0 at y_max.
+
+        The renderer's own reflectance: the wood texture with the ArUco marker, darkened
+        towards the char colour by the char fraction `char` (raster rows from y_min), under
+        even white light, one pixel per raster pixel (square).
+        """
+        chi = np.flipud(np.asarray(char, dtype=np.float32))[:, :, None]
+        albedo = self._wood * (1.0 - chi) + self._char_rgb * chi
+        return np.rint(255.0 * linear_to_srgb(albedo)).astype(np.uint8)
+
     def render(self, T_world_camera, light=None, attenuation=1.0, rng=None):
         """
         Return the RGB image (H, W, 3) uint8 at a camera pose.

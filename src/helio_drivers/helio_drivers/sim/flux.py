@@ -235,7 +235,6 @@ def shadow_fractions(field, x_edges, y_edges, samples=3):
     shadow, the aperture's size, is far larger than a cell); only the cells along its
     edge are sampled.
     """
-    nx, ny = len(x_edges) - 1, len(y_edges) - 1
     corners = field.in_shadow(x_edges[None, :], y_edges[:, None])      # (ny + 1, nx + 1)
     inside = corners[:-1, :-1] & corners[:-1, 1:] & corners[1:, :-1] & corners[1:, 1:]
     outside = ~(corners[:-1, :-1] | corners[:-1, 1:] | corners[1:, :-1] | corners[1:, 1:])

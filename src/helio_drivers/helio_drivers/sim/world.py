@@ -6,7 +6,9 @@ The simulated world, without ROS: sun, lens flux, wood, cameras, clock and canva
 x in R^5), traces the sun through the lens at that pose (re-traced only when something moved),
 heats the wood and chars it. ``thermal_image()`` and ``rgb_image()`` render the cameras at
 their poses on the end effector; ``canvas_image()`` and ``charred_dots()`` give the painting
-and its ground truth, ``write_outputs(dir)`` writes them as ``canvas.png`` and ``dots.csv``.
+and its ground truth, ``canvas_picture()`` the burnt panel as a person sees it;
+``write_outputs(dir)`` writes ``canvas.png`` (the picture), ``canvas_mask.png`` (the char
+map) and ``dots.csv``.
 
 Nothing here tells the controller what it wants to know: the robot's heading, the sun and
 the lens focus are only visible through the images, as on the real rig.
@@ -334,22 +336,41 @@ class SimWorld:
         """Return the char map as a top-view mono8 image (255 bare, 0 char; row 0 at y_max)."""
         return np.flipud(np.rint(255.0 * (1.0 - self.panel.char))).astype(np.uint8)
 
+    def canvas_picture(self):
+        """
+        Return the burnt panel as a person sees it: (H, W, 3) uint8 sRGB RGB, row 0 at y_max.
+
+        Top view, one square pixel per char raster pixel: the RGB camera's wood, marker and
+        char colours (``RgbCamera.top_view``) under even white light.
+        """
+        return self.rgb.top_view(self.panel.char)
+
     def charred_dots(self, minimum_area=0.05e-6):
         """Return the CharredDots: connected charred regions, centroid and size (world)."""
         return charred_dots_of(self.panel.charred_mask(), self.panel.raster_origin,
                                self.panel.grid.fine_cell, minimum_area)
 
     def write_outputs(self, directory):
-        """Write canvas.png (the char map) and dots.csv (ground truth); return their paths."""
+        """
+        Write canvas.png, canvas_mask.png and dots.csv; return (canvas.png, dots.csv).
+
+        canvas.png is the burnt panel as a person sees it (``canvas_picture``),
+        canvas_mask.png the char map as data (``canvas_image``: 255 bare, 0 charred), both
+        top views of the same pixels; dots.csv the charred dots (ground truth).
+        """
         os.makedirs(directory, exist_ok=True)
         png = os.path.join(directory, 'canvas.png')
-        if not cv2.imwrite(png, self.canvas_image()):
-            raise OSError(f'could not write {png}')
+        mask = os.path.join(directory, 'canvas_mask.png')
+        for path, image in ((png, cv2.cvtColor(self.canvas_picture(), cv2.COLOR_RGB2BGR)),
+                            (mask, self.canvas_image())):
+            if not cv2.imwrite(path, image):
+                raise OSError(f'could not write {path}')
         csv = os.path.join(directory, 'dots.csv')
         x_min, x_max, y_min, y_max = self.panel.extent
         with open(csv, 'w') as stream:
             stream.write(f'# charred dots (char fraction >= {self.panel.wood.charred_fraction}) '
-                         f'in the world frame; canvas.png spans x {x_min:.4f}..{x_max:.4f} m, '
+                         f'in the world frame; canvas.png and canvas_mask.png span x '
+                         f'{x_min:.4f}..{x_max:.4f} m, '
                          f'y {y_min:.4f}..{y_max:.4f} m, {self.panel.grid.fine_cell:.6f} m/px, '
                          'row 0 at y_max\n')
             stream.write('x_m,y_m,diameter_m,area_m2\n')
