@@ -3,7 +3,7 @@
 import math
 
 from helio_drivers.sim.flux import (bin_on_edges, irradiance_on_cells, LensFlux,
-                                   shadow_fractions)
+                                    shadow_fractions)
 from helio_optics.geometry import homogeneous, rotation_y, unit
 from helio_optics.lens import LensParameters, pmma_index
 import numpy as np

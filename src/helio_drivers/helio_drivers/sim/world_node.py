@@ -162,7 +162,8 @@ class SimWorldNode(Node):
         self.truth_period = declare(self, 'truth_period', 1.0,
                                     'period of the sim/truth/* topics [s sim]', 0.01, 3600.0)
         self.output_dir = declare(self, 'output_dir', '',
-                                  'write canvas.png, canvas_mask.png and dots.csv here at shutdown')
+                                  'write canvas.png, canvas_mask.png and dots.csv here at '
+                                  'shutdown')
         rig_file = rig_file_or_default(declare(
             self, RIG_FILE_PARAMETER, '',
             "the world's TRUE rig geometry YAML (empty: the workspace's config/rig.yaml)"))
