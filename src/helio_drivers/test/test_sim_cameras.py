@@ -223,7 +223,7 @@ def test_kept_and_partly_redone_frames_equal_a_fresh_render():
 
 def test_linearised_read_out_has_the_exact_read_outs_mean_and_noise_per_level():
     # a ramp of light from black to 1.3 x full scale along the columns, all channels
-    settings = RgbSettings(width=320, height=96)
+    settings = RgbSettings(width=320, height=128)
     camera = RgbCamera((-0.04, 0.06, -0.04, 0.06), 2e-4, settings)
     webcam = camera._webcam
     read_out = NoisyReadOut(webcam, (settings.height, settings.width, 3), seed=3)
@@ -231,18 +231,18 @@ def test_linearised_read_out_has_the_exact_read_outs_mean_and_noise_per_level():
                       settings.height, axis=0).repeat(3, axis=2)
     exact_prepared, fast_prepared = webcam.prepare(light), read_out.prepare(light)
     rng = np.random.default_rng(4)
-    exact = np.stack([webcam.expose(exact_prepared, rng) for _ in range(12)]).astype(float)
-    fast = np.stack([read_out.expose(fast_prepared, rng) for _ in range(12)]).astype(float)
-    # per column (one light level): 12 frames x 96 rows x 3 channels
+    exact = np.stack([webcam.expose(exact_prepared, rng) for _ in range(16)]).astype(float)
+    fast = np.stack([read_out.expose(fast_prepared, rng) for _ in range(16)]).astype(float)
+    # per column (one light level): 16 frames x 128 rows x 3 channels
     exact_mean, fast_mean = exact.mean(axis=(0, 1, 3)), fast.mean(axis=(0, 1, 3))
     exact_std, fast_std = exact.std(axis=(0, 1, 3)), fast.std(axis=(0, 1, 3))
     levels = np.linspace(0.0, 1.3, settings.width)
     # 8-bit levels; near black (under 1 % of full scale, where the sRGB curve bends most)
     # and just above full scale (the exact read-out dips below 255) up to half a level
     ordinary = (levels > 0.01) & ((levels < 0.995) | (levels > 1.02))
-    assert np.abs(fast_mean - exact_mean)[ordinary].max() < 0.3
+    assert np.abs(fast_mean - exact_mean)[ordinary].max() < 0.35
     assert np.abs(fast_mean - exact_mean).max() < 0.6
-    noisy = exact_std > 0.8
+    noisy = (exact_std > 0.8) & ordinary
     assert noisy.sum() > 200
     assert np.abs(fast_std[noisy] / exact_std[noisy] - 1.0).max() < 0.08
     saturated = levels > 1.05

@@ -180,7 +180,7 @@ class NoisyReadOut:
     round(T(c) + T''(c) sigma^2 / 2 + T'(c) sigma(c) z), saturated to 0..255: two OpenCV
     passes (0.6 ms). That is the exact read-out's mean to second order and its standard
     deviation to first order in the noise (the test compares them level by level: within
-    0.3 of a level, half a level under 1 % of full scale; the 10-bit ADC's step, a
+    a third of a level, half a level under 1 % of full scale; the 10-bit ADC's step, a
     fraction of the noise, is not reproduced). Where the light is above full scale the
     pixel reads 255 whatever the noise (the exact read-out dips half a level below 255
     within 1 % above full scale).
@@ -211,8 +211,11 @@ class NoisyReadOut:
         self._gain = (slope * sigma).astype(np.float32)
         self._last = len(curve) - 1
         self.shape = tuple(shape)
-        padded = (self.FRAMES, shape[0] + self.PAD, shape[1] + self.PAD) + tuple(shape[2:])
-        draw = np.random.default_rng(seed + 211).standard_normal(padded, dtype=np.float32)
+        # flat frames a few rows longer than the image: a crop at any offset is contiguous
+        self._size = int(np.prod(self.shape))
+        self._slack = self.PAD * int(np.prod(self.shape[1:]))
+        draw = np.random.default_rng(seed + 211).standard_normal(
+            (self.FRAMES, self._size + self._slack), dtype=np.float32)
         self._bank = np.clip(np.rint(draw * np.float32(self.NOISE_SCALE)),
                              -127, 127).astype(np.int8)
 
@@ -226,12 +229,11 @@ class NoisyReadOut:
         return np.take(self._level, index), np.take(self._gain, index)
 
     def expose(self, prepared, rng=None):
-        """Return the 8-bit frame of (level, gain): a random crop of the noise bank."""
+        """Return the 8-bit frame of (level, gain): noise from a random offset in the bank."""
         level, gain = prepared
         rng = np.random.default_rng() if rng is None else rng
-        k, dy, dx = (int(v) for v in rng.integers(0, (self.FRAMES, self.PAD + 1,
-                                                      self.PAD + 1)))
-        noise = self._bank[k, dy:dy + level.shape[0], dx:dx + level.shape[1]]
+        k, offset = (int(v) for v in rng.integers(0, (self.FRAMES, self._slack + 1)))
+        noise = self._bank[k, offset:offset + self._size].reshape(level.shape)
         image = cv2.add(level, cv2.multiply(noise, gain, dtype=cv2.CV_32F), dtype=cv2.CV_8U)
         quality = self._webcam.settings.jpeg_quality
         return jpeg_round_trip(image, quality) if quality > 0 else image
