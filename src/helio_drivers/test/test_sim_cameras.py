@@ -263,6 +263,13 @@ def test_ground_light_by_homography_equals_casting_every_pixel_ray():
         assert difference.mean() < 2e-3 and difference.max() < 0.05
         part = camera._radiance(pose, texture, rect=(100, 50, 300, 200))
         assert np.abs(part - warped[50:200, 100:300]).max() < 0.05
-    # a camera that sees the horizon is cast pixel by pixel
-    assert camera._texture_homography(look_at([0.0, -0.2, 0.02], [0.0, 0.3, 0.05]),
-                                      texture) is None
+    # a camera that sees the horizon: nothing above it, the ground below it as cast
+    pose = look_at([0.0, -0.15, 0.03], [0.0, 0.3, 0.0])
+    assert camera._texture_homography(pose, texture)[1] is not None
+    warped = camera._radiance(pose, texture)
+    cast = camera._renderer.radiance(pose, texture, background=0.0)
+    assert np.all(warped[:5] == 0.0) and np.abs(warped - cast).mean() < 2e-3
+    rolled = look_at([0.0, -0.15, 0.03], [0.0, 0.3, 0.0], up=(0.4, 0.0, 1.0))
+    warped = camera._radiance(rolled, texture)
+    cast = camera._renderer.radiance(rolled, texture, background=0.0)
+    assert np.all(warped[0, :5] == 0.0) and np.abs(warped - cast).mean() < 2e-3

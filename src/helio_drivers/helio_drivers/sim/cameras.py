@@ -469,29 +469,35 @@ class RgbCamera:
         supersampling, or pixels that look above the horizon go through
         ``GroundRenderer.radiance``'s per-pixel rays.
         """
-        homography = self._texture_homography(T_world_camera, texture)
-        if homography is None:
+        mapping = self._texture_homography(T_world_camera, texture)
+        if mapping is None:
             return self._renderer.radiance(T_world_camera, texture, background=0.0,
                                            rect=rect)
+        homography, downward = mapping
         x0, y0, x1, y1 = rect or (0, 0, self.camera.width, self.camera.height)
         if x0 or y0:
             homography = homography @ np.array([[1.0, 0.0, x0], [0.0, 1.0, y0],
                                                 [0.0, 0.0, 1.0]])
         source = texture.linear_image()
         channels = 1 if source.ndim == 2 else source.shape[2]
-        return cv2.warpPerspective(source, homography, (x1 - x0, y1 - y0),
-                                   flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                                   borderMode=cv2.BORDER_CONSTANT,
-                                   borderValue=(0.0,) * max(channels, 1))
+        light = cv2.warpPerspective(source, homography, (x1 - x0, y1 - y0),
+                                    flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                    borderMode=cv2.BORDER_CONSTANT,
+                                    borderValue=(0.0,) * max(channels, 1))
+        if downward is not None:    # the pixels at and above the horizon see no panel
+            _blank_above_horizon(light, downward, x0, y0)
+        return light
 
     def _texture_homography(self, T_world_camera, texture):
         """
         Return the 3 x 3 map from image pixels (centres at integers) to texture pixels.
 
-        None when the camera distorts, supersamples or sees above the horizon. A pixel's
-        ray is d = R K^-1 (u, v, 1); it meets z = 0 at o - (o_z / d_z) d, so the ground
-        point is the homogeneous (o_x d_z - o_z d_x, o_y d_z - o_z d_y, d_z): linear in
-        (u, v, 1); the texture's pixel grid is affine in the ground point.
+        Returns (homography, None), or (homography, (a, b, c)) when part of the image
+        looks at or above the horizon: a u + b v + c >= 0 there (no panel). None when the
+        camera distorts, supersamples or sees no ground at all. A pixel's ray is
+        d = R K^-1 (u, v, 1); it meets z = 0 at o - (o_z / d_z) d, so the ground point is
+        the homogeneous (o_x d_z - o_z d_x, o_y d_z - o_z d_y, d_z): linear in (u, v, 1);
+        the texture's pixel grid is affine in the ground point.
         """
         if self._renderer.supersample != 1 or np.any(self.camera.distortion):
             return None
@@ -500,7 +506,8 @@ class RgbCamera:
         width, height = self.camera.width, self.camera.height
         corners = np.array([[-0.5, -0.5, 1.0], [width - 0.5, -0.5, 1.0],
                             [-0.5, height - 0.5, 1.0], [width - 0.5, height - 0.5, 1.0]])
-        if not np.all(corners @ rays[2] < 0.0):    # d_z affine: its sign at the corners
+        downward = corners @ rays[2]              # d_z, affine in (u, v): its corners
+        if not np.any(downward < 0.0) or pose[2, 3] <= 0.0:
             return None
         ox, oy, oz = pose[:3, 3]
         ground = np.stack([ox * rays[2] - oz * rays[0], oy * rays[2] - oz * rays[1], rays[2]])
@@ -509,7 +516,8 @@ class RgbCamera:
         to_texture = np.array([[1.0 / sx, 0.0, -x_min / sx - 0.5],
                                [0.0, -1.0 / sy, y_max / sy - 0.5],
                                [0.0, 0.0, 1.0]])
-        return to_texture @ ground
+        horizon = None if np.all(downward < 0.0) else tuple(float(v) for v in rays[2])
+        return to_texture @ ground, horizon
 
     def _raster_box_world(self, r0, r1, c0, c1):
         """Return the world extent (x_min, x_max, y_min, y_max) of raster rows/cols [m]."""
@@ -545,6 +553,24 @@ class RgbCamera:
         wide = (max(inner[0] - margin, 0), max(inner[1] - margin, 0),
                 min(inner[2] + margin, width), min(inner[3] + margin, height))
         return wide, inner
+
+
+def _blank_above_horizon(light, downward, x0, y0):
+    """
+    Zero the pixels of `light` (its corner at image pixel (x0, y0)) at or above the horizon.
+
+    There a u + b v + c >= 0, (a, b, c) = `downward`. Rows wholly above it are zeroed as
+    slices, rows it crosses (few: the camera's roll is small) from the crossing column on.
+    """
+    a, b, c = downward
+    height, width = light.shape[:2]
+    rows = np.arange(y0, y0 + height)
+    left = a * x0 + b * rows + c
+    right = a * (x0 + width - 1) + b * rows + c
+    light[(left >= 0.0) & (right >= 0.0)] = 0.0
+    for row in np.flatnonzero((left >= 0.0) != (right >= 0.0)):
+        columns = np.arange(x0, x0 + width)
+        light[row][a * columns + b * rows[row] + c >= 0.0] = 0.0
 
 
 def _intersection(a, b):
