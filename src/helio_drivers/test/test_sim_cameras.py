@@ -5,7 +5,8 @@ import math
 
 import cv2
 from helio_drivers.sim.cameras import (celsius_to_centikelvin, centikelvin_to_celsius,
-                                       RgbCamera, RgbSettings, ThermalCamera, ThermalSettings)
+                                       NoisyReadOut, RgbCamera, RgbSettings, ThermalCamera,
+                                       ThermalSettings)
 from helio_drivers.sim.wood import WoodPanel
 from helio_optics.geometry import (intersect_plane, invert_transform, look_at,
                                    transform_points, transform_vectors)
@@ -45,6 +46,36 @@ def test_thermal_image_is_the_surface_field_at_pixel_centres_capped():
     counts = camera.image(panel, T_world_camera)
     assert counts.dtype == np.uint16 and counts.shape == (120, 160)
     assert centikelvin_to_celsius(counts).max() == pytest.approx(settings.cap, abs=0.005)
+
+
+def test_thermal_frames_kept_between_steps_and_re_centres_equal_a_fresh_cast():
+    panel = heated_panel()
+    settings = ThermalSettings(noise_sigma=0.0)
+    kept = ThermalCamera(settings)
+    T_world_camera = look_at([-0.03, 0.0, 0.09], [0.01, 0.005, 0.0], up=(1.0, 0.0, 0.0))
+    kept.temperatures(panel, T_world_camera)
+    spot = np.zeros(panel.cell_areas.shape)
+    for _ in range(5):
+        panel.step(0.1, spot + 900.0, 900.0)     # the field changes under a kept view
+        fresh = ThermalCamera(settings).temperatures(panel, T_world_camera)
+        assert np.array_equal(kept.temperatures(panel, T_world_camera), fresh)
+    assert panel.follow((0.03, 0.01))            # the patch moves: the view is redone
+    fresh = ThermalCamera(settings).temperatures(panel, T_world_camera)
+    assert np.array_equal(kept.temperatures(panel, T_world_camera), fresh)
+    moved = look_at([-0.02, 0.01, 0.09], [0.01, 0.005, 0.0], up=(1.0, 0.0, 0.0))
+    fresh = ThermalCamera(settings).temperatures(panel, moved)
+    assert np.array_equal(kept.temperatures(panel, moved), fresh)
+
+
+def test_thermal_noise_differs_frame_to_frame():
+    panel = WoodPanel(extent=(-0.04, 0.06, -0.04, 0.06))
+    camera = ThermalCamera(ThermalSettings(noise_sigma=0.2))
+    pose = look_at([0.0, 0.0, 0.1], [0.0, 0.0, 0.0], up=(1.0, 0.0, 0.0))
+    rng = np.random.default_rng(5)
+    frames = [camera.temperatures(panel, pose, rng) for _ in range(4)]
+    differences = [np.std(a - b) for a, b in zip(frames, frames[1:])]
+    # independent noise: the difference of two frames has sqrt(2) sigma
+    assert differences == pytest.approx([0.2 * math.sqrt(2.0)] * 3, rel=0.05)
 
 
 def test_thermal_noise_has_the_asked_sigma_and_centikelvin_round_trips():
@@ -188,3 +219,57 @@ def test_kept_and_partly_redone_frames_equal_a_fresh_render():
     before = dict(kept.renders)
     kept.render(poses[1], None, 0.0)
     assert kept.renders == {**before, 'frames': before['frames'] + 1}
+
+
+def test_linearised_read_out_has_the_exact_read_outs_mean_and_noise_per_level():
+    # a ramp of light from black to 1.3 x full scale along the columns, all channels
+    settings = RgbSettings(width=320, height=128)
+    camera = RgbCamera((-0.04, 0.06, -0.04, 0.06), 2e-4, settings)
+    webcam = camera._webcam
+    read_out = NoisyReadOut(webcam, (settings.height, settings.width, 3), seed=3)
+    light = np.repeat(np.linspace(0.0, 1.3, settings.width, dtype=np.float32)[None, :, None],
+                      settings.height, axis=0).repeat(3, axis=2)
+    exact_prepared, fast_prepared = webcam.prepare(light), read_out.prepare(light)
+    rng = np.random.default_rng(4)
+    exact = np.stack([webcam.expose(exact_prepared, rng) for _ in range(16)]).astype(float)
+    fast = np.stack([read_out.expose(fast_prepared, rng) for _ in range(16)]).astype(float)
+    # per column (one light level): 16 frames x 128 rows x 3 channels
+    exact_mean, fast_mean = exact.mean(axis=(0, 1, 3)), fast.mean(axis=(0, 1, 3))
+    exact_std, fast_std = exact.std(axis=(0, 1, 3)), fast.std(axis=(0, 1, 3))
+    levels = np.linspace(0.0, 1.3, settings.width)
+    # 8-bit levels; near black (under 1 % of full scale, where the sRGB curve bends most)
+    # and just above full scale (the exact read-out dips below 255) up to half a level
+    ordinary = (levels > 0.01) & ((levels < 0.995) | (levels > 1.02))
+    assert np.abs(fast_mean - exact_mean)[ordinary].max() < 0.35
+    assert np.abs(fast_mean - exact_mean).max() < 0.6
+    noisy = (exact_std > 0.8) & ordinary
+    assert noisy.sum() > 200
+    assert np.abs(fast_std[noisy] / exact_std[noisy] - 1.0).max() < 0.08
+    saturated = levels > 1.05
+    assert np.all(fast[:, :, saturated] == 255) and np.all(exact[:, :, saturated] == 255)
+    # no two frames alike
+    assert np.abs(fast[0] - fast[1]).mean() > 0.5
+
+
+def test_ground_light_by_homography_equals_casting_every_pixel_ray():
+    camera = RgbCamera((-0.04, 0.06, -0.04, 0.06), 2e-4, noise_free())
+    texture = camera._albedo
+    for pose in (look_at([0.02, -0.07, 0.11], [0.0, 0.0, 0.0]),
+                 look_at([0.05, 0.03, 0.09], [0.03, 0.02, 0.0], up=(0.0, 1.0, 0.0))):
+        warped = camera._radiance(pose, texture)
+        cast = camera._renderer.radiance(pose, texture, background=0.0)
+        difference = np.abs(warped - cast)
+        # both sample bilinearly at 1/32 px; they differ where that rounding differs
+        assert difference.mean() < 2e-3 and difference.max() < 0.05
+        part = camera._radiance(pose, texture, rect=(100, 50, 300, 200))
+        assert np.abs(part - warped[50:200, 100:300]).max() < 0.05
+    # a camera that sees the horizon: nothing above it, the ground below it as cast
+    pose = look_at([0.0, -0.15, 0.03], [0.0, 0.3, 0.0])
+    assert camera._texture_homography(pose, texture)[1] is not None
+    warped = camera._radiance(pose, texture)
+    cast = camera._renderer.radiance(pose, texture, background=0.0)
+    assert np.all(warped[:5] == 0.0) and np.abs(warped - cast).mean() < 2e-3
+    rolled = look_at([0.0, -0.15, 0.03], [0.0, 0.3, 0.0], up=(0.4, 0.0, 1.0))
+    warped = camera._radiance(rolled, texture)
+    cast = camera._renderer.radiance(rolled, texture, background=0.0)
+    assert np.all(warped[0, :5] == 0.0) and np.abs(warped - cast).mean() < 2e-3

@@ -2,7 +2,8 @@
 
 import math
 
-from helio_drivers.sim.flux import irradiance_on_cells, LensFlux
+from helio_drivers.sim.flux import (bin_on_edges, irradiance_on_cells, LensFlux,
+                                    shadow_fractions)
 from helio_optics.geometry import homogeneous, rotation_y, unit
 from helio_optics.lens import LensParameters, pmma_index
 import numpy as np
@@ -76,3 +77,77 @@ def test_bad_flux_parameters_are_refused():
         LensFlux(LENS, rays=10)
     with pytest.raises(ValueError, match='weights'):
         LensFlux(LENS, rays=1000, bands=((0.5, 0.0),))
+
+
+def test_lens_shadow_by_quadratic_form_equals_casting_each_point_to_the_lens():
+    lens = LensFlux(LensParameters(focal_length=0.081, aperture_diameter=0.038), rays=500)
+    s0 = np.array([0.3, -0.4, -0.866])
+    T = np.eye(4)
+    T[:3, :3] = np.array([[0.96, 0.0, -0.28], [0.0, 1.0, 0.0], [0.28, 0.0, 0.96]]).T
+    T[:3, 3] = [0.06, 0.07, 0.08]
+    field = lens.field(T, s0 / np.linalg.norm(s0))
+    xs, ys = np.linspace(-0.02, 0.14, 161), np.linspace(-0.02, 0.14, 157)
+    shadow = field.in_shadow(xs[None, :], ys[:, None])
+    # cast every point along the sun ray to the lens plane, one by one
+    towards_sun, normal = -field.sun_ray, field.lens_axis
+    expected = np.zeros_like(shadow)
+    for row, y in enumerate(ys):
+        for col, x in enumerate(xs):
+            point = np.array([x, y, 0.0])
+            distance = (field.lens_centre - point) @ normal / (towards_sun @ normal)
+            hit = point + distance * towards_sun
+            expected[row, col] = (distance > 0.0 and np.linalg.norm(hit - field.lens_centre)
+                                  <= field.aperture_radius)
+    assert 500 < shadow.sum() and np.array_equal(shadow, expected)
+
+
+def test_binning_on_uneven_edges_equals_numpy_histogram2d():
+    rng = np.random.default_rng(7)
+    x_edges = np.concatenate([[-0.03, -0.012, -0.007], np.arange(-0.006, 0.0061, 0.0002),
+                              [0.009, 0.02, 0.03]])
+    y_edges = x_edges + 0.001
+    x, y = rng.normal(0.0, 0.01, 50000), rng.normal(0.0, 0.012, 50000)
+    x[:5], y[:5] = x_edges[[0, 3, 10, -1, -1]], y_edges[[0, 4, 20, -1, 3]]   # on edges
+    weights = rng.random(50000)
+    expected, _, _ = np.histogram2d(y, x, bins=(y_edges, x_edges), weights=weights)
+    assert np.allclose(bin_on_edges(x, y, weights, x_edges, y_edges), expected,
+                       rtol=1e-12, atol=1e-12)
+
+
+def test_a_moving_lens_traces_fewer_rays_with_the_same_power_and_spot():
+    lens = LensParameters(focal_length=0.081, aperture_diameter=0.038)
+    flux = LensFlux(lens, rays=20000, beam_spread=0.004, moving_rays=2500)
+    s0 = unit([0.2, 0.1, -1.0])
+    T = homogeneous(np.eye(3), [0.0, 0.0, 0.08])
+    full = flux.field(T, s0)
+    T_moved = homogeneous(np.eye(3), [0.0002, 0.0, 0.08])
+    sparse = flux.field(T_moved, s0, moving=True)
+    assert flux.field_is_sparse and len(sparse.power) * 7 < len(full.power)
+    assert sparse.total_power() == pytest.approx(full.total_power(), rel=0.01)
+    assert sparse.centroid() == pytest.approx(full.centroid() + [0.0002, 0.0], abs=2e-5)
+    spread = np.sqrt(np.average((full.points - full.centroid()) ** 2, axis=0,
+                                weights=full.power))
+    sparse_spread = np.sqrt(np.average((sparse.points - sparse.centroid()) ** 2, axis=0,
+                                       weights=sparse.power))
+    assert sparse_spread == pytest.approx(spread, rel=0.05)
+    # held still, the next field is traced in full again
+    held = flux.field(T_moved, s0)
+    assert not flux.field_is_sparse and len(held.power) == len(full.power)
+
+
+@pytest.mark.parametrize('tilt', [-0.2, 0.0, 0.2])
+def test_shadow_fractions_sampled_along_the_edge_equal_sampling_every_cell(tilt):
+    lens = LensFlux(LensParameters(focal_length=0.081, aperture_diameter=0.038), rays=500)
+    s0 = unit([0.35, -0.2, -0.9])
+    T = homogeneous(rotation_y(tilt), [0.071, 0.069, 0.08])
+    field = lens.field(T, s0)
+    lateral = np.concatenate([-np.cumsum(0.0002 * 1.25 ** np.arange(15))[::-1] - 0.006,
+                              np.arange(-0.006, 0.00601, 0.0002),
+                              np.cumsum(0.0002 * 1.25 ** np.arange(15)) + 0.006])
+    x_edges, y_edges = 0.06 + lateral, 0.075 + lateral
+    fractions = (np.arange(3) + 0.5) / 3
+    xs = x_edges[:-1, None] + fractions[None] * np.diff(x_edges)[:, None]
+    ys = y_edges[:-1, None] + fractions[None] * np.diff(y_edges)[:, None]
+    every_cell = field.in_shadow(xs[None, :, None, :], ys[:, None, :, None]).mean(axis=(2, 3))
+    fast = shadow_fractions(field, x_edges, y_edges, 3)
+    assert 0.0 < every_cell.mean() < 1.0 and np.array_equal(fast, every_cell)

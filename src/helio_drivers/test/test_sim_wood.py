@@ -192,3 +192,118 @@ def test_bad_input_is_refused_and_leaves_the_state_unchanged():
     with pytest.raises(ValueError, match='conductivity'):
         WoodParameters(conductivity=0.0)
     assert np.array_equal(panel.theta, before) and panel.time == 0.0
+
+
+def reference_douglas_step(panel, dt, irradiance):
+    """
+    One step of the scheme the panel documents, written plainly (the reference).
+
+    Douglas ADI for backward Euler in double precision with dense solves per axis (the
+    operators rebuilt from the panel's edges), losses linearised at the top layer,
+    evaporation then pyrolysis as whole-field masked sinks, then the char update. Returns
+    (theta, moisture, unpyrolysed, char) without touching the panel.
+    """
+    w = panel.wood
+    rho_c = w.volumetric_heat_capacity
+
+    def operator(edges, diffusivity):
+        widths = np.abs(np.diff(edges))
+        coupling = diffusivity / np.abs(np.diff(0.5 * (edges[:-1] + edges[1:])))
+        matrix = np.zeros((len(widths), len(widths)))
+        for i, c in enumerate(coupling):
+            matrix[i, i + 1] += c / widths[i]
+            matrix[i, i] -= c / widths[i]
+            matrix[i + 1, i] += c / widths[i + 1]
+            matrix[i + 1, i + 1] -= c / widths[i + 1]
+        return matrix
+
+    ax = operator(panel.x_edges, w.diffusivity_along_grain)
+    ay = operator(panel.y_edges, w.diffusivity)
+    az = operator(panel.z_edges, w.diffusivity)
+    dz = panel.z_widths
+    h_back = 1.0 / (1.0 / w.convection_back + 0.5 * dz[-1] / w.conductivity)
+    az[-1, -1] -= h_back / (rho_c * dz[-1])
+    theta = panel.theta.copy()
+    t = theta[0] + w.ambient + 273.15
+    radiating = w.emissivity * 5.670374419e-8
+    loss = w.convection_top * theta[0] + radiating * (t ** 4 - (w.ambient + 273.15) ** 4)
+    h_top = w.convection_top + 4.0 * radiating * t ** 3
+    absorbed = panel.absorptance() * irradiance
+    source = np.zeros_like(theta)
+    source[0] = (absorbed - (loss - h_top * theta[0])) / (rho_c * dz[0])
+    ay_u = np.einsum('ij,zjx->zix', ay, theta)
+    az_u = np.einsum('ij,jyx->iyx', az, theta)
+    az_u[0] -= h_top * theta[0] / (rho_c * dz[0])
+    eye = np.eye(len(panel.x_centres))
+    u1 = np.einsum('ij,zyj->zyi', np.linalg.inv(eye - dt * ax),
+                   theta + dt * (ay_u + az_u + source))
+    u2 = np.einsum('ij,zjx->zix', np.linalg.inv(eye - dt * ay), u1 - dt * ay_u)
+    rhs = u2 - dt * az_u
+    u3 = np.empty_like(rhs)
+    for row in range(rhs.shape[1]):
+        for col in range(rhs.shape[2]):
+            matrix = np.eye(len(dz)) - dt * az
+            matrix[0, 0] += dt * h_top[row, col] / (rho_c * dz[0])
+            u3[:, row, col] = np.linalg.solve(matrix, rhs[:, row, col])
+    moisture, unpyrolysed = panel.moisture.copy(), panel.unpyrolysed.copy()
+    boiling = w.boiling_temperature - w.ambient
+    wet = (u3 > boiling) & (moisture > 0.0)
+    used = np.minimum(rho_c * (u3[wet] - boiling), moisture[wet] * w.latent_heat)
+    u3[wet] -= used / rho_c
+    moisture[wet] = np.maximum(moisture[wet] - used / w.latent_heat, 0.0)
+    threshold = w.pyrolysis_temperature - w.ambient
+    hot = u3 > threshold
+    rate = w.char_preexponential * np.exp(-w.char_activation_energy
+                                          / (8.314462618 * (u3[hot] + w.ambient + 273.15)))
+    heat = w.heat_of_pyrolysis * w.density
+    used = np.minimum(rho_c * (u3[hot] - threshold),
+                      unpyrolysed[hot] * -np.expm1(-rate * dt) * heat)
+    u3[hot] -= used / rho_c
+    unpyrolysed[hot] = np.maximum(unpyrolysed[hot] - used / heat, 0.0)
+    t = u3[0] + w.ambient + 273.15
+    loss = w.convection_top * u3[0] + radiating * (t ** 4 - (w.ambient + 273.15) ** 4)
+    surface = u3[0] + (absorbed - loss) * 0.5 * dz[0] / w.conductivity + w.ambient
+    char = panel.char.copy()
+    fine = panel._fine
+    rows, cols = panel._raster_fine
+    chi = char[rows, cols]
+    charring = surface[fine, fine] > w.pyrolysis_temperature
+    rate = w.char_preexponential * np.exp(-w.char_activation_energy
+                                          / (8.314462618 * (surface[fine, fine] + 273.15)))
+    chi[charring] = 1.0 - (1.0 - chi[charring]) * np.exp(-rate[charring] * dt)
+    return u3, moisture, unpyrolysed, char
+
+
+def test_step_equals_the_plain_douglas_scheme_while_water_boils_and_wood_chars():
+    panel = WoodPanel(extent=(-0.03, 0.03, -0.03, 0.03))
+    strong = gaussian_irradiance(panel, (0.0, 0.0), 0.8, 1.0e-3) + 800.0
+    checked = set()
+    for step in range(80):
+        if step in (3, 25, 79):   # heating up; water boiling off; wood charring
+            theta, moisture, unpyrolysed, char = reference_douglas_step(panel, 0.1, strong)
+            panel.step(0.1, strong)
+            scale = float(np.abs(theta).max())
+            assert np.abs(panel.theta - theta).max() < 1e-6 * scale
+            assert np.allclose(panel.moisture, moisture, rtol=1e-6, atol=1e-9)
+            assert np.allclose(panel.unpyrolysed, unpyrolysed, rtol=1e-6, atol=1e-9)
+            assert np.allclose(panel.char, char, rtol=1e-6, atol=1e-9)
+            checked.add(step)
+        else:
+            panel.step(0.1, strong)
+    assert checked == {3, 25, 79}
+    assert panel.char.max() > 0.5 and panel.unpyrolysed.min() < 1.0
+
+
+def test_evaporated_heat_equals_the_latent_heat_of_the_water_lost():
+    wood = WoodParameters(heat_of_pyrolysis=0.0)
+    panel = WoodPanel(wood, extent=(-0.03, 0.03, -0.03, 0.03))
+    assert panel.follow((0.009, 0.004))    # a re-centred patch's fields are carried over
+    strong = gaussian_irradiance(panel, (0.009, 0.004), 0.8, 1.0e-3)
+    for _ in range(60):
+        panel.step(0.1, strong)
+    volumes = panel.z_widths[:, None, None] * panel.cell_areas[None]
+    water_lost = float(np.sum(volumes * (wood.moisture_content * wood.density
+                                         - panel.moisture)))
+    assert panel.moisture.min() == 0.0       # the spot dried out, so it could get hotter
+    assert panel.surface_temperature().max() > wood.pyrolysis_temperature
+    assert panel.ledger.evaporated == pytest.approx(wood.latent_heat * water_lost, rel=1e-9)

@@ -53,7 +53,8 @@ def test_a_held_focus_chars_a_dot_written_to_the_canvas_outputs(tmp_path):
     world.set_joints(true_sun_focus_joints(world, [0.07, 0.05, 0.0], 0.112))  # retreat 3 cm
     world.run(3.0)
     png, csv = world.write_outputs(str(tmp_path))
-    assert np.array_equal(cv2.imread(png, cv2.IMREAD_UNCHANGED), world.canvas_image())
+    mask = cv2.imread(str(tmp_path / 'canvas_mask.png'), cv2.IMREAD_UNCHANGED)
+    assert np.array_equal(mask, world.canvas_image())
     rows = np.loadtxt(csv, delimiter=',', comments='#', skiprows=2, ndmin=2)
     assert rows.shape == (1, 4)
     x, y, diameter, _ = rows[0]
@@ -61,6 +62,27 @@ def test_a_held_focus_chars_a_dot_written_to_the_canvas_outputs(tmp_path):
           f'{spot[1] * 1e3:.2f}) mm, diameter {diameter * 1e3:.2f} mm')
     assert math.hypot(x - spot[0], y - spot[1]) < 0.3e-3
     assert 0.5e-3 < diameter < 4e-3
+    # canvas.png is the panel as a person sees it: the same pixels (square, top view)
+    picture = cv2.imread(png, cv2.IMREAD_COLOR)
+    assert picture.shape[:2] == mask.shape
+    grey = cv2.cvtColor(picture, cv2.COLOR_BGR2GRAY).astype(float)
+    charred = mask == 0
+    column, row = (np.array([x, world.panel.extent[3] - y]) / 2e-4
+                   - [world.panel.extent[0] / 2e-4, 0]).astype(int)
+    bare_wood = grey[row - 40:row + 40, column - 40:column + 40][
+        ~charred[row - 40:row + 40, column - 40:column + 40]]
+    assert charred.sum() > 10 and grey[charred].mean() < 0.5 * np.median(bare_wood)
+    hue = cv2.cvtColor(picture, cv2.COLOR_BGR2HSV)[row - 40:row - 20, column, 0]
+    assert np.all((hue > 5) & (hue < 30))      # the wood around it is wood-coloured
+    # and the marker reads back where the world put it: 40 mm centred on the origin
+    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(
+        cv2.aruco.DICT_4X4_50), cv2.aruco.DetectorParameters())
+    corners, ids, _ = detector.detectMarkers(cv2.cvtColor(picture, cv2.COLOR_BGR2GRAY))
+    assert ids is not None and list(ids.ravel()) == [0]
+    x_min, _, _, y_max = world.panel.extent
+    expected = (np.array([[-0.02, 0.02], [0.02, 0.02], [0.02, -0.02], [-0.02, -0.02]])
+                - [x_min, y_max]) / [2e-4, -2e-4] - 0.5
+    assert np.abs(corners[0][0] - expected).max() < 1.0
 
 
 def test_flat_parameters_round_trip_and_unknown_names_are_refused():

@@ -32,6 +32,7 @@ import math
 import cv2
 from helio_optics.geometry import invert_transform, PinholeCamera, transform_points
 from helio_optics.ground_render import (decode_srgb8, GroundRenderer, GroundTexture,
+                                        jpeg_round_trip, linear_to_srgb,
                                         make_panel_texture, WebcamSettings)
 import numpy as np
 
@@ -57,6 +58,7 @@ class RgbSettings:
     tone_curve: str = 'srgb'        # 'srgb' or 'linear'
     bayer: bool = False             # RGGB mosaic + demosaic
     jpeg_quality: int = 0           # 0: no JPEG
+    exact_read_out: bool = False    # noise through the exact ADC and tone table (slower)
 
     def camera(self):
         """Return the PinholeCamera of these settings."""
@@ -101,26 +103,140 @@ def centikelvin_to_celsius(counts):
 class ThermalCamera:
     """Renders the panel surface temperature as the thermal camera reads it."""
 
-    def __init__(self, settings=None):
-        """Cache the pixel-centre rays of the camera."""
+    def __init__(self, settings=None, seed=0):
+        """Cache the pixel-centre rays of the camera; `seed` draws the noise bank."""
         self.settings = settings or ThermalSettings()
         self.camera = self.settings.camera()
         self._renderer = GroundRenderer(self.camera, supersample=1)
+        self._view_key = None      # (pose, panel, placement) of the kept view
+        self._view = None          # (pixels seeing the panel, their surface sampler)
+        self._noise = NoiseBank((self.camera.height, self.camera.width), seed)
 
     def temperatures(self, panel, T_world_camera, rng=None):
         """Return the read-out [degC] per pixel: the field at pixel centres, noise, cap."""
-        x, y = self._renderer.ground_points(T_world_camera)
-        seen = np.isfinite(x)
-        field = np.full(x.shape, panel.wood.ambient)
-        field[seen] = panel.surface_temperature_at(x[seen], y[seen])
+        seen, sample = self._seen(panel, T_world_camera)
+        field = np.full(seen.shape, panel.wood.ambient)
+        field[seen] = sample()
         if self.settings.noise_sigma > 0.0:
-            rng = np.random.default_rng() if rng is None else rng
-            field = field + rng.normal(0.0, self.settings.noise_sigma, field.shape)
-        return np.clip(field, self.settings.floor, self.settings.cap)
+            field += self.settings.noise_sigma * self._noise.draw(rng)
+        return np.clip(field, self.settings.floor, self.settings.cap, out=field)
+
+    def _seen(self, panel, T_world_camera):
+        """
+        Return (mask of the pixels that see the panel, sampler of their surface points).
+
+        Kept while the camera and the heat patch stand still (they do while a dot heats):
+        a frame then costs the gather of the surface field, not the ray casts.
+        """
+        key = (np.asarray(T_world_camera, dtype=np.float64).tobytes(), id(panel),
+               panel.placement)
+        if key != self._view_key:
+            x, y = self._renderer.ground_points(T_world_camera)
+            seen = np.isfinite(x)
+            self._view = (seen, panel.surface_sampler(x[seen], y[seen]))
+            self._view_key = key
+        return self._view
 
     def image(self, panel, T_world_camera, rng=None):
         """Return the 16UC1 centikelvin read-out (H, W) as uint16."""
         return celsius_to_centikelvin(self.temperatures(panel, T_world_camera, rng))
+
+
+class NoiseBank:
+    """
+    White Gaussian noise frames N(0, 1) for one image size, cut from a bank drawn once.
+
+    The bank holds a few frames a little larger than the image; each draw is a random crop
+    (frame and offset from the caller's generator): every frame's noise is white and
+    Gaussian and costs a crop instead of a draw (as ``ground_render.Webcam`` does).
+    """
+
+    FRAMES = 4
+    PAD = 32
+
+    def __init__(self, shape, seed=0):
+        """Draw the bank for images of `shape` (H, W) from `seed`."""
+        self.shape = tuple(shape)
+        padded = (self.FRAMES, self.shape[0] + self.PAD, self.shape[1] + self.PAD)
+        self._bank = np.random.default_rng(seed + 101).standard_normal(padded)
+
+    def draw(self, rng=None):
+        """Return one frame of N(0, 1) noise (a view of the bank: do not write to it)."""
+        rng = np.random.default_rng() if rng is None else rng
+        k, dy, dx = (int(v) for v in rng.integers(0, (self.FRAMES, self.PAD + 1,
+                                                      self.PAD + 1)))
+        return self._bank[k, dy:dy + self.shape[0], dx:dx + self.shape[1]]
+
+
+class NoisyReadOut:
+    """
+    A webcam's sensor read-out with noise, linearised about each pixel's noise-free level.
+
+    ``ground_render.Webcam`` reads every frame out exactly: noise added to the ADC codes,
+    clipping, the ADC, then the tone curve by a table look-up of 921 600 codes (2.5 ms a
+    frame at 640 x 480, half of it the look-up). Here the noise-free level of each pixel in
+    8-bit output units, T(c), and the output's noise per unit of the sensor's noise,
+    T'(c) sigma(c), are worked out once per change of the light; a frame is then
+    round(T(c) + T''(c) sigma^2 / 2 + T'(c) sigma(c) z), saturated to 0..255: two OpenCV
+    passes (0.6 ms). That is the exact read-out's mean to second order and its standard
+    deviation to first order in the noise (the test compares them level by level: within
+    a third of a level, half a level under 1 % of full scale; the 10-bit ADC's step, a
+    fraction of the noise, is not reproduced). Where the light is above full scale the
+    pixel reads 255 whatever the noise (the exact read-out dips half a level below 255
+    within 1 % above full scale).
+    """
+
+    SUBCODES = 8      # table steps per ADC code
+    NOISE_SCALE = 25.0   # the int8 bank holds N(0, 1) x 25, clipped at 5 sigma
+    PAD = 32
+    FRAMES = 3
+
+    def __init__(self, webcam, shape, seed=0):
+        """Build the tone tables of a ``Webcam`` and an int8 noise bank for `shape`."""
+        s = webcam.settings
+        self._webcam = webcam
+        self.top = float((1 << int(s.adc_bits)) - 1)
+        samples = np.arange(int(self.top) * self.SUBCODES + 2) / (self.SUBCODES * self.top)
+        curve = linear_to_srgb(samples) if s.tone_curve == 'srgb' else np.clip(samples, 0, 1)
+        curve = 255.0 * curve
+        per_code = np.gradient(curve) * self.SUBCODES
+        # half the curvature per code^2: E[T(c + s z)] = T(c) + T''(c) s^2 / 2 + ...
+        bend = 0.5 * np.gradient(per_code) * self.SUBCODES
+        slope = per_code / self.NOISE_SCALE     # per unit of the int8 noise bank
+        curve[-1], slope[-1], bend[-1] = 255.0, 0.0, 0.0    # above full scale: saturated
+        # the noise is a function of the light, so are the level and the gain: one table
+        # each, indexed by the light
+        sigma = webcam.noise_sigma(samples.astype(np.float32)).astype(float) * self.top
+        self._level = (curve + bend * sigma * sigma).astype(np.float32)
+        self._gain = (slope * sigma).astype(np.float32)
+        self._last = len(curve) - 1
+        self.shape = tuple(shape)
+        # flat frames a few rows longer than the image: a crop at any offset is contiguous
+        self._size = int(np.prod(self.shape))
+        self._slack = self.PAD * int(np.prod(self.shape[1:]))
+        draw = np.random.default_rng(seed + 211).standard_normal(
+            (self.FRAMES, self._size + self._slack), dtype=np.float32)
+        self._bank = np.clip(np.rint(draw * np.float32(self.NOISE_SCALE)),
+                             -127, 127).astype(np.int8)
+
+    def prepare(self, light):
+        """Return (level, gain) float32 for linear `light` on the sensor (after the optics)."""
+        light = np.asarray(light, dtype=np.float32)
+        index = light * np.float32(self.top * self.SUBCODES)
+        np.clip(index, 0.0, float(self._last), out=index)
+        index += np.float32(0.5)
+        index = index.astype(np.intp)
+        return np.take(self._level, index), np.take(self._gain, index)
+
+    def expose(self, prepared, rng=None):
+        """Return the 8-bit frame of (level, gain): noise from a random offset in the bank."""
+        level, gain = prepared
+        rng = np.random.default_rng() if rng is None else rng
+        k, offset = (int(v) for v in rng.integers(0, (self.FRAMES, self._slack + 1)))
+        noise = self._bank[k, offset:offset + self._size].reshape(level.shape)
+        image = cv2.add(level, cv2.multiply(noise, gain, dtype=cv2.CV_32F), dtype=cv2.CV_8U)
+        quality = self._webcam.settings.jpeg_quality
+        return jpeg_round_trip(image, quality) if quality > 0 else image
 
 
 class RgbCamera:
@@ -133,6 +249,10 @@ class RgbCamera:
         self.camera = self.settings.camera()
         self._renderer = GroundRenderer(self.camera, supersample=self.settings.supersample)
         self._webcam = self._renderer.webcam(self.settings.webcam(seed + 7))
+        s = self.settings
+        noisy = s.read_noise > 0.0 or s.full_well_electrons > 0.0
+        self._read_out = (NoisyReadOut(self._webcam, (s.height, s.width, 3), seed + 7)
+                          if noisy and not s.bayer and not s.exact_read_out else None)
         texture = make_panel_texture(extent=panel_extent, metres_per_pixel=pixel_size,
                                      marker_side=marker_side, marker_id=marker_id,
                                      dictionary=dictionary, seed=seed)
@@ -170,6 +290,18 @@ class RgbCamera:
                                           + self._char_rgb * chi)
         self._dirty.append((r0, r1, c0, c1))
 
+    def top_view(self, char):
+        """
+        Return the panel as a person sees it from above (H, W, 3) uint8 sRGB, row 0 at y_max.
+
+        The renderer's own reflectance: the wood texture with the ArUco marker, darkened
+        towards the char colour by the char fraction `char` (raster rows from y_min), under
+        even white light, one pixel per raster pixel (square).
+        """
+        chi = np.flipud(np.asarray(char, dtype=np.float32))[:, :, None]
+        albedo = self._wood * (1.0 - chi) + self._char_rgb * chi
+        return np.rint(255.0 * linear_to_srgb(albedo)).astype(np.uint8)
+
     def render(self, T_world_camera, light=None, attenuation=1.0, rng=None):
         """
         Return the RGB image (H, W, 3) uint8 at a camera pose.
@@ -199,6 +331,8 @@ class RgbCamera:
         else:
             for rect in _merged([rect for rect in changed if rect is not None]):
                 self._compose(rect)
+        if self._read_out is not None:
+            return self._read_out.expose(self._prepared, rng)
         return self._webcam.expose(self._prepared, rng)
 
     def panel_light(self, light, attenuation=1.0):
@@ -225,8 +359,8 @@ class RgbCamera:
         changed = []
         if pose != self._panel_pose or self._panel is None:
             self.renders['panel'] += 1
-            self._panel = self._webcam.optics(self._renderer.radiance(
-                T_world_camera, self._albedo, background=0.0))
+            self._panel = self._webcam.optics(self._radiance(
+                T_world_camera, self._albedo))
             self._panel_pose, self._dirty = pose, []
         for r0, r1, c0, c1 in self._dirty:
             rect = self._image_rect(T_world_camera, self._raster_box_world(r0, r1, c0, c1))
@@ -234,8 +368,8 @@ class RgbCamera:
                 continue
             self.renders['panel_parts'] += 1
             wide, inner = rect
-            part = self._webcam.optics(self._renderer.radiance(
-                T_world_camera, self._albedo, background=0.0, rect=wide), wide)
+            part = self._webcam.optics(self._radiance(
+                T_world_camera, self._albedo, rect=wide), wide)
             x0, y0, x1, y1 = inner
             self._panel[y0:y1, x0:x1] = part[y0 - wide[1]:y1 - wide[1],
                                              x0 - wide[0]:x1 - wide[0]]
@@ -263,8 +397,8 @@ class RgbCamera:
         self._window_texture = GroundTexture(image=patch * self._window_change, extent=box,
                                              linear=True)
         wide, inner = rect
-        term = self._webcam.optics(self._renderer.radiance(
-            T_world_camera, self._window_texture, background=0.0, rect=wide), wide)
+        term = self._webcam.optics(self._radiance(
+            T_world_camera, self._window_texture, rect=wide), wide)
         x0, y0, x1, y1 = inner
         self._window_rect = inner
         self._window_term = term[y0 - wide[1]:y1 - wide[1], x0 - wide[0]:x1 - wide[0]].copy()
@@ -291,8 +425,8 @@ class RgbCamera:
             if inner is None:
                 continue
             wide = rect[0]
-            term = self._webcam.optics(self._renderer.radiance(
-                T_world_camera, self._window_texture, background=0.0, rect=wide), wide)
+            term = self._webcam.optics(self._radiance(
+                T_world_camera, self._window_texture, rect=wide), wide)
             x0, y0, x1, y1 = inner
             wx, wy = self._window_rect[:2]
             self._window_term[y0 - wy:y1 - wy, x0 - wx:x1 - wx] = \
@@ -314,14 +448,76 @@ class RgbCamera:
                 wx, wy = self._window_rect[:2]
                 x0, y0, x1, y1 = both
                 self._frame[y0:y1, x0:x1] += self._window_term[y0 - wy:y1 - wy, x0 - wx:x1 - wx]
+        prepare = (self._webcam.prepare if self._read_out is None
+                   else self._read_out.prepare)
         if prepare_all:
-            self._prepared = self._webcam.prepare(self._frame)
+            self._prepared = prepare(self._frame)
             return
         x0, y0, x1, y1 = rect
-        codes, sigma = self._webcam.prepare(self._frame[y0:y1, x0:x1])
-        self._prepared[0][y0:y1, x0:x1] = codes
-        if sigma is not None:
-            self._prepared[1][y0:y1, x0:x1] = sigma
+        first, second = prepare(self._frame[y0:y1, x0:x1])
+        self._prepared[0][y0:y1, x0:x1] = first
+        if second is not None:
+            self._prepared[1][y0:y1, x0:x1] = second
+
+    def _radiance(self, T_world_camera, texture, rect=None):
+        """
+        Return a linear texture's light per pixel (of `rect` (x0, y0, x1, y1), or all).
+
+        A pinhole camera without distortion maps the ground plane to the image by a
+        homography: one ``cv2.warpPerspective`` of the texture (no per-pixel rays, maps or
+        NaN handling: a moving camera's frame costs a third). Cameras with distortion,
+        supersampling, or pixels that look above the horizon go through
+        ``GroundRenderer.radiance``'s per-pixel rays.
+        """
+        mapping = self._texture_homography(T_world_camera, texture)
+        if mapping is None:
+            return self._renderer.radiance(T_world_camera, texture, background=0.0,
+                                           rect=rect)
+        homography, downward = mapping
+        x0, y0, x1, y1 = rect or (0, 0, self.camera.width, self.camera.height)
+        if x0 or y0:
+            homography = homography @ np.array([[1.0, 0.0, x0], [0.0, 1.0, y0],
+                                                [0.0, 0.0, 1.0]])
+        source = texture.linear_image()
+        channels = 1 if source.ndim == 2 else source.shape[2]
+        light = cv2.warpPerspective(source, homography, (x1 - x0, y1 - y0),
+                                    flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                    borderMode=cv2.BORDER_CONSTANT,
+                                    borderValue=(0.0,) * max(channels, 1))
+        if downward is not None:    # the pixels at and above the horizon see no panel
+            _blank_above_horizon(light, downward, x0, y0)
+        return light
+
+    def _texture_homography(self, T_world_camera, texture):
+        """
+        Return the 3 x 3 map from image pixels (centres at integers) to texture pixels.
+
+        Returns (homography, None), or (homography, (a, b, c)) when part of the image
+        looks at or above the horizon: a u + b v + c >= 0 there (no panel). None when the
+        camera distorts, supersamples or sees no ground at all. A pixel's ray is
+        d = R K^-1 (u, v, 1); it meets z = 0 at o - (o_z / d_z) d, so the ground point is
+        the homogeneous (o_x d_z - o_z d_x, o_y d_z - o_z d_y, d_z): linear in (u, v, 1);
+        the texture's pixel grid is affine in the ground point.
+        """
+        if self._renderer.supersample != 1 or np.any(self.camera.distortion):
+            return None
+        pose = np.asarray(T_world_camera, dtype=float)
+        rays = pose[:3, :3] @ np.linalg.inv(np.asarray(self.camera.matrix, dtype=float))
+        width, height = self.camera.width, self.camera.height
+        corners = np.array([[-0.5, -0.5, 1.0], [width - 0.5, -0.5, 1.0],
+                            [-0.5, height - 0.5, 1.0], [width - 0.5, height - 0.5, 1.0]])
+        downward = corners @ rays[2]              # d_z, affine in (u, v): its corners
+        if not np.any(downward < 0.0) or pose[2, 3] <= 0.0:
+            return None
+        ox, oy, oz = pose[:3, 3]
+        ground = np.stack([ox * rays[2] - oz * rays[0], oy * rays[2] - oz * rays[1], rays[2]])
+        x_min, _, _, y_max = texture.extent
+        sx, sy = texture.metres_per_pixel
+        to_texture = np.array([[1.0 / sx, 0.0, -x_min / sx - 0.5],
+                               [0.0, -1.0 / sy, y_max / sy - 0.5],
+                               [0.0, 0.0, 1.0]])
+        horizon = None if np.all(downward < 0.0) else tuple(float(v) for v in rays[2])
+        return to_texture @ ground, horizon
 
     def _raster_box_world(self, r0, r1, c0, c1):
         """Return the world extent (x_min, x_max, y_min, y_max) of raster rows/cols [m]."""
@@ -357,6 +553,24 @@ class RgbCamera:
         wide = (max(inner[0] - margin, 0), max(inner[1] - margin, 0),
                 min(inner[2] + margin, width), min(inner[3] + margin, height))
         return wide, inner
+
+
+def _blank_above_horizon(light, downward, x0, y0):
+    """
+    Zero the pixels of `light` (its corner at image pixel (x0, y0)) at or above the horizon.
+
+    There a u + b v + c >= 0, (a, b, c) = `downward`. Rows wholly above it are zeroed as
+    slices, rows it crosses (few: the camera's roll is small) from the crossing column on.
+    """
+    a, b, c = downward
+    height, width = light.shape[:2]
+    rows = np.arange(y0, y0 + height)
+    left = a * x0 + b * rows + c
+    right = a * (x0 + width - 1) + b * rows + c
+    light[(left >= 0.0) & (right >= 0.0)] = 0.0
+    for row in np.flatnonzero((left >= 0.0) != (right >= 0.0)):
+        columns = np.arange(x0, x0 + width)
+        light[row][a * columns + b * rows[row] + c >= 0.0] = 0.0
 
 
 def _intersection(a, b):

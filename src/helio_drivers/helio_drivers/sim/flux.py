@@ -54,26 +54,46 @@ class FluxField:
         return float(self.power.sum())
 
     def in_shadow(self, x, y):
-        """Tell which panel points (x, y) lie in the lens shadow (sunward ray meets the lens)."""
-        points = np.stack(np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float),
-                                              0.0), axis=-1)
+        """
+        Tell which panel points (x, y) lie in the lens shadow (sunward ray meets the lens).
+
+        Following the sun ray from a panel point to the lens plane is a parallel projection,
+        affine in (x, y): the offset from the lens centre there is a x + b y + c, so the
+        test is a quadratic form and the distance along the ray an affine one (broadcast
+        over x and y: a grid costs a few passes, not a 3-vector per point).
+        """
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        shape = np.broadcast_shapes(x.shape, y.shape)
         towards_sun = -self.sun_ray
-        denominator = towards_sun @ self.lens_axis
+        normal = self.lens_axis
+        denominator = float(towards_sun @ normal)
         if abs(denominator) < 1e-9:
-            return np.zeros(points.shape[:-1], bool)
-        distance = ((self.lens_centre - points) @ self.lens_axis) / denominator
-        on_plane = points + distance[..., None] * towards_sun
-        radial = np.linalg.norm(on_plane - self.lens_centre, axis=-1)
-        return (distance > 0.0) & (radial <= self.aperture_radius)
+            return np.zeros(shape, bool)
+        # offset at the lens plane of panel point p: Q (p - O), Q the oblique projector
+        projector = np.eye(3) - np.outer(towards_sun, normal) / denominator
+        a, b = projector[:, 0], projector[:, 1]
+        c = -projector @ self.lens_centre
+        radial2 = ((a @ a) * x * x + (2.0 * (a @ b)) * x * y + (b @ b) * y * y
+                   + (2.0 * (a @ c)) * x + (2.0 * (b @ c)) * y + (c @ c))
+        distance = (float(self.lens_centre @ normal) - normal[0] * x
+                    - normal[1] * y) / denominator
+        return np.broadcast_to((distance > 0.0) & (radial2 <= self.aperture_radius ** 2),
+                               shape)
 
 
 class LensFlux:
     """Traces the world's (true) lens and makes irradiance maps on the wood patch."""
 
     def __init__(self, lens=None, rays=30000, seed=0, bands=DEFAULT_BANDS,
-                 move_tolerance=2e-5, angle_tolerance=5e-4, beam_spread=0.0):
+                 move_tolerance=2e-5, angle_tolerance=5e-4, beam_spread=0.0,
+                 moving_rays=None):
         """
         Trace `rays` samples of `lens` (LensParameters, design index) in spectral `bands`.
+
+        `moving_rays` (default `rays`) per band are traced instead while the lens keeps
+        moving (``field(..., moving=True)``): every k-th sample of the sunflower pattern,
+        each standing for k times the aperture area, so the power is the same and the
+        spot is as wide, only noisier.
 
         `beam_spread` [rad] is the standard deviation of a Gaussian angular error added to
         every ray (per axis): the facet slope and profile errors of a real moulded lens,
@@ -104,14 +124,24 @@ class LensFlux:
             # The facets are cut once, for the design index: keep their slopes.
             samples = replace(design, lens=band_lens)
             self._bands.append((band_lens, samples, float(weight)))
+        stride = max(1, int(round(rays / moving_rays))) if moving_rays else 1
+        self._moving_bands = [(band_lens, _every(samples, stride), weight)
+                              for band_lens, samples, weight in self._bands]
+        self.moving_stride = stride
         self.move_tolerance = move_tolerance
         self.angle_tolerance = angle_tolerance
         self._field = None
         self._key = None
+        self._field_is_sparse = False
         self.traces = 0
 
-    def field(self, T_world_lens, sun_ray_world):
-        """Return the FluxField for a lens pose and sun ray (world), re-traced only if moved."""
+    def field(self, T_world_lens, sun_ray_world, moving=False):
+        """
+        Return the FluxField for a lens pose and sun ray (world), re-traced only if moved.
+
+        With `moving` a re-trace uses the moving lens's fewer rays; a field traced so is
+        traced again in full as soon as it is asked for without `moving`.
+        """
         T = np.asarray(T_world_lens, dtype=float)
         s0 = np.asarray(sun_ray_world, dtype=float)
         s0 = s0 / np.linalg.norm(s0)
@@ -121,16 +151,24 @@ class LensFlux:
             turned = math.acos(np.clip(T[:3, 2] @ T_old[:3, 2], -1.0, 1.0))
             sun_turned = math.acos(np.clip(s0 @ s_old, -1.0, 1.0))
             if (moved <= self.move_tolerance and turned <= self.angle_tolerance
-                    and sun_turned <= self.angle_tolerance):
+                    and sun_turned <= self.angle_tolerance
+                    and (moving or not self._field_is_sparse)):
                 return self._field
-        self._field = self._trace(T, s0)
+        sparse = moving and self.moving_stride > 1
+        self._field = self._trace(T, s0, self._moving_bands if sparse else self._bands)
+        self._field_is_sparse = sparse
         self._key = (T.copy(), s0.copy())
         self.traces += 1
         return self._field
 
-    def _trace(self, T_world_lens, s0):
+    @property
+    def field_is_sparse(self):
+        """Tell whether the present field was traced with the moving lens's fewer rays."""
+        return self._field_is_sparse
+
+    def _trace(self, T_world_lens, s0, bands):
         points, powers, lost, incident = [], [], 0.0, 0.0
-        for band_lens, samples, weight in self._bands:
+        for band_lens, samples, weight in bands:
             result = trace(band_lens, samples, s0, T_world_lens, irradiance=1.0)
             hit = result.hit
             points.append(result.points[hit, :2])
@@ -146,6 +184,33 @@ class LensFlux:
                          tir_fraction=lost / incident if incident > 0.0 else 0.0)
 
 
+def _every(samples, stride):
+    """Return every `stride`-th of LensSamples, each standing for `stride` times the area."""
+    if stride == 1:
+        return samples
+    picked = {name: getattr(samples, name)[::stride]
+              for name in ('facet_sin', 'radius', 'azimuth', 'disk_u', 'disk_v', 'ring')}
+    return replace(samples, weight=samples.weight[::stride] * stride, **picked)
+
+
+def bin_on_edges(x, y, weights, x_edges, y_edges):
+    """
+    Sum `weights` of points (x, y) per cell of increasing edges: (len(y_edges) - 1, ...x).
+
+    What ``np.histogram2d(y, x, bins=(y_edges, x_edges), weights=weights)`` gives (a point
+    on the last edge counts in the last cell), by a search per axis and one ``bincount``
+    (histogram2d on uneven edges costs several times more).
+    """
+    nx, ny = len(x_edges) - 1, len(y_edges) - 1
+    column = np.searchsorted(x_edges, x, side='right') - 1
+    row = np.searchsorted(y_edges, y, side='right') - 1
+    column[x == x_edges[-1]] = nx - 1
+    row[y == y_edges[-1]] = ny - 1
+    inside = (column >= 0) & (column < nx) & (row >= 0) & (row < ny)
+    return np.bincount(row[inside] * nx + column[inside], weights=weights[inside],
+                       minlength=nx * ny).reshape(ny, nx)
+
+
 def irradiance_on_cells(field, x_edges, y_edges, dni, shadow_samples=3):
     """
     Irradiance [W/m^2] on the cells of a grid (y, x) for direct normal irradiance `dni`.
@@ -155,13 +220,38 @@ def irradiance_on_cells(field, x_edges, y_edges, dni, shadow_samples=3):
     """
     x_edges, y_edges = np.asarray(x_edges, float), np.asarray(y_edges, float)
     areas = np.outer(np.diff(y_edges), np.diff(x_edges))
-    binned, _, _ = np.histogram2d(field.points[:, 1], field.points[:, 0],
-                                  bins=(y_edges, x_edges), weights=field.power)
-    fractions = (np.arange(shadow_samples) + 0.5) / shadow_samples
-    xs = x_edges[:-1, None] + fractions[None] * np.diff(x_edges)[:, None]   # (nx, s)
-    ys = y_edges[:-1, None] + fractions[None] * np.diff(y_edges)[:, None]   # (ny, s)
-    shadow = field.in_shadow(xs[None, :, None, :], ys[:, None, :, None]).mean(axis=(2, 3))
+    binned = bin_on_edges(field.points[:, 0], field.points[:, 1], field.power, x_edges,
+                          y_edges)
+    shadow = shadow_fractions(field, x_edges, y_edges, shadow_samples)
     return dni * (binned / areas + field.direct * (1.0 - shadow))
+
+
+def shadow_fractions(field, x_edges, y_edges, samples=3):
+    """
+    Share of each cell (y, x) in the lens shadow, from `samples`^2 points per cell.
+
+    The shadow is convex: a cell whose four corners are in it is in it, and one whose
+    corners are all out and whose neighbours' corners are all out too is out of it (the
+    shadow, the aperture's size, is far larger than a cell); only the cells along its
+    edge are sampled.
+    """
+    corners = field.in_shadow(x_edges[None, :], y_edges[:, None])      # (ny + 1, nx + 1)
+    inside = corners[:-1, :-1] & corners[:-1, 1:] & corners[1:, :-1] & corners[1:, 1:]
+    outside = ~(corners[:-1, :-1] | corners[:-1, 1:] | corners[1:, :-1] | corners[1:, 1:])
+    edge = ~(inside | outside)
+    near = edge.copy()                        # the edge cells and their eight neighbours
+    near[1:] |= edge[:-1]
+    near[:-1] |= edge[1:]
+    near[:, 1:] |= near[:, :-1].copy()
+    near[:, :-1] |= near[:, 1:].copy()
+    shadow = inside.astype(float)
+    rows, cols = np.nonzero(near)
+    if rows.size:
+        fractions = (np.arange(samples) + 0.5) / samples
+        xs = x_edges[cols, None] + fractions[None] * (x_edges[cols + 1] - x_edges[cols])[:, None]
+        ys = y_edges[rows, None] + fractions[None] * (y_edges[rows + 1] - y_edges[rows])[:, None]
+        shadow[rows, cols] = field.in_shadow(xs[:, None, :], ys[:, :, None]).mean(axis=(1, 2))
+    return shadow
 
 
 def lens_pose_in_world(T_robot_world, T_robot_lens):

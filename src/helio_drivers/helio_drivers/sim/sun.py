@@ -129,12 +129,20 @@ class Sun:
 
     def ray_robot(self, when):
         """Return the unit sun ray s0 (the way light travels) in the robot frame (Eq 2)."""
-        phi0, theta0 = ray_angles_from_sun(self.position(when), self.heading)
+        return self.ray_robot_of(self.position(when))
+
+    def ray_robot_of(self, position):
+        """Return s0 in the robot frame for a sun `position` (from ``position``)."""
+        phi0, theta0 = ray_angles_from_sun(position, self.heading)
         return direction_from_angles(phi0, theta0)
 
     def ray_world(self, when):
         """Return the unit sun ray s0 in the world (panel) frame."""
-        return self.T_robot_world[:3, :3].T @ self.ray_robot(when)
+        return self.ray_world_of(self.position(when))
+
+    def ray_world_of(self, position):
+        """Return s0 in the world frame for a sun `position` (one ephemeris call for both)."""
+        return self.T_robot_world[:3, :3].T @ self.ray_robot_of(position)
 
     def irradiance(self, when, time):
         """Return the DNI [W/m^2] at `when` and simulated `time` [s] (clouds); 0 at night."""

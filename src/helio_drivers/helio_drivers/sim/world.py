@@ -6,7 +6,9 @@ The simulated world, without ROS: sun, lens flux, wood, cameras, clock and canva
 x in R^5), traces the sun through the lens at that pose (re-traced only when something moved),
 heats the wood and chars it. ``thermal_image()`` and ``rgb_image()`` render the cameras at
 their poses on the end effector; ``canvas_image()`` and ``charred_dots()`` give the painting
-and its ground truth, ``write_outputs(dir)`` writes them as ``canvas.png`` and ``dots.csv``.
+and its ground truth, ``canvas_picture()`` the burnt panel as a person sees it;
+``write_outputs(dir)`` writes ``canvas.png`` (the picture), ``canvas_mask.png`` (the char
+map) and ``dots.csv``.
 
 Nothing here tells the controller what it wants to know: the robot's heading, the sun and
 the lens focus are only visible through the images, as on the real rig.
@@ -22,6 +24,7 @@ from helio_drivers.sim.cameras import (light_window, RgbCamera, RgbSettings, The
                                        ThermalSettings)
 from helio_drivers.sim.clock import SimClock
 from helio_drivers.sim.flux import irradiance_on_cells, lens_pose_in_world, LensFlux
+from helio_drivers.sim.memory import keep_freed_memory
 from helio_drivers.sim.sun import CloudCover, RandomClouds, Sun
 from helio_drivers.sim.wood import GridParameters, WoodPanel, WoodParameters
 from helio_optics.ephemeris import Site
@@ -52,6 +55,7 @@ class SimSettings:
     lens: LensParameters = field(default_factory=lambda: LensParameters(
         focal_length=0.081, aperture_diameter=0.038, transmission=0.92))   # tuned
     flux_rays: int = 20000
+    flux_rays_moving: int = 2500         # per band while the lens keeps moving
     beam_spread: float = 0.004           # lens optical errors, Gaussian sigma [rad] (tuned)
     wood: WoodParameters = field(default_factory=WoodParameters)
     grid: GridParameters = field(default_factory=GridParameters)
@@ -165,6 +169,7 @@ class SimWorld:
         world's clock (``SimDevices(world.clock)``) and attach their ``joint_positions`` with
         ``attach_joint_source``.
         """
+        keep_freed_memory()   # its arrays are reused, not page-faulted in (memory.py)
         self.settings = settings or SimSettings()
         s = self.settings
         if not s.step > 0.0:
@@ -176,9 +181,10 @@ class SimWorld:
         self.site = Site(s.latitude_deg, s.longitude_deg, s.elevation)
         self.sun = Sun(self.site, math.radians(s.robot_heading_deg), s.dni, s.cloud_cover(),
                        self.T_robot_world)
-        self.flux = LensFlux(s.lens, rays=s.flux_rays, seed=s.seed, beam_spread=s.beam_spread)
+        self.flux = LensFlux(s.lens, rays=s.flux_rays, seed=s.seed, beam_spread=s.beam_spread,
+                             moving_rays=s.flux_rays_moving)
         self.panel = WoodPanel(s.wood, s.grid, s.panel_extent)
-        self.thermal = ThermalCamera(s.thermal)
+        self.thermal = ThermalCamera(s.thermal, seed=s.seed)
         self.rgb = RgbCamera(self.panel.extent, s.grid.fine_cell, s.rgb, s.marker_side,
                              s.marker_id, s.marker_dictionary, seed=s.seed)
         self._rng = np.random.default_rng(s.seed)
@@ -268,12 +274,15 @@ class SimWorld:
         now = self.clock()
         when = self.clock.datetime()
         if now - self._sun_ray_time >= 1.0 or self._sun_ray is None:  # pysolar ~0.4 ms/call
-            self._sun_ray = self.sun.ray_world(when)
+            position = self.sun.position(when)
+            self._sun_ray = self.sun.ray_world_of(position)
             self._sun_ray_time = now
-            self._sun_up = self.sun.position(when).elevation > 0.0
+            self._sun_up = position.elevation > 0.0
         self._dni = self.sun.dni * self.sun.clouds.attenuation(now) if self._sun_up else 0.0
+        pose_key = self._pose_key
         T_world_lens = lens_pose_in_world(self.T_robot_world, self.pose().T_robot_lens)
-        self._field = self.flux.field(T_world_lens, self._sun_ray)
+        moving = pose_key is not None and self._pose_key != pose_key   # since the last step
+        self._field = self.flux.field(T_world_lens, self._sun_ray, moving=moving)
         centroid = self._field.centroid()
         self.panel.follow(centroid)
         key = (self.flux.traces, tuple(self.panel.centre))
@@ -343,22 +352,41 @@ class SimWorld:
         """Return the char map as a top-view mono8 image (255 bare, 0 char; row 0 at y_max)."""
         return np.flipud(np.rint(255.0 * (1.0 - self.panel.char))).astype(np.uint8)
 
+    def canvas_picture(self):
+        """
+        Return the burnt panel as a person sees it: (H, W, 3) uint8 sRGB RGB, row 0 at y_max.
+
+        Top view, one square pixel per char raster pixel: the RGB camera's wood, marker and
+        char colours (``RgbCamera.top_view``) under even white light.
+        """
+        return self.rgb.top_view(self.panel.char)
+
     def charred_dots(self, minimum_area=0.05e-6):
         """Return the CharredDots: connected charred regions, centroid and size (world)."""
         return charred_dots_of(self.panel.charred_mask(), self.panel.raster_origin,
                                self.panel.grid.fine_cell, minimum_area)
 
     def write_outputs(self, directory):
-        """Write canvas.png (the char map) and dots.csv (ground truth); return their paths."""
+        """
+        Write canvas.png, canvas_mask.png and dots.csv; return (canvas.png, dots.csv).
+
+        canvas.png is the burnt panel as a person sees it (``canvas_picture``),
+        canvas_mask.png the char map as data (``canvas_image``: 255 bare, 0 charred), both
+        top views of the same pixels; dots.csv the charred dots (ground truth).
+        """
         os.makedirs(directory, exist_ok=True)
         png = os.path.join(directory, 'canvas.png')
-        if not cv2.imwrite(png, self.canvas_image()):
-            raise OSError(f'could not write {png}')
+        mask = os.path.join(directory, 'canvas_mask.png')
+        for path, image in ((png, cv2.cvtColor(self.canvas_picture(), cv2.COLOR_RGB2BGR)),
+                            (mask, self.canvas_image())):
+            if not cv2.imwrite(path, image):
+                raise OSError(f'could not write {path}')
         csv = os.path.join(directory, 'dots.csv')
         x_min, x_max, y_min, y_max = self.panel.extent
         with open(csv, 'w') as stream:
             stream.write(f'# charred dots (char fraction >= {self.panel.wood.charred_fraction}) '
-                         f'in the world frame; canvas.png spans x {x_min:.4f}..{x_max:.4f} m, '
+                         f'in the world frame; canvas.png and canvas_mask.png span x '
+                         f'{x_min:.4f}..{x_max:.4f} m, '
                          f'y {y_min:.4f}..{y_max:.4f} m, {self.panel.grid.fine_cell:.6f} m/px, '
                          'row 0 at y_max\n')
             stream.write('x_m,y_m,diameter_m,area_m2\n')

@@ -8,9 +8,10 @@ and publishes:
 
 - ``/clock`` (rosgraph_msgs/Clock, global): simulated time; run every other node with
   ``use_sim_time:=true``;
-- ``rgb/image_raw`` (rgb8, rendered only while someone subscribes) and ``rgb/camera_info``
-  at ``rgb_rate`` of simulated time; ``thermal/image_raw`` (16UC1 centikelvin) and
-  ``thermal/camera_info`` at ``thermal_rate`` (sensor-data QoS);
+- ``rgb/image_raw`` (rgb8) and ``rgb/camera_info`` at ``rgb_rate`` of simulated time;
+  ``thermal/image_raw`` (16UC1 centikelvin) and ``thermal/camera_info`` at
+  ``thermal_rate`` (sensor-data QoS); each image is rendered only while someone
+  subscribes to it (the camera_info always goes out);
 - ``sim/canvas`` (mono8 top view of the char map, 255 bare wood) at ``canvas_rate``;
 - the world's ground truth for tests and recordings, under ``sim/truth/`` (reliable,
   transient local, every ``truth_period``): ``sun_direction`` (geometry_msgs/Vector3Stamped,
@@ -44,7 +45,8 @@ for ``lockstep_timeout`` of wall time is left behind, so a stopped one cannot fr
 world.
 
 Topic names are relative, so the world runs under a namespace with its rig's nodes.
-At shutdown it writes ``canvas.png`` and ``dots.csv`` into ``output_dir`` (if set).
+At shutdown it writes ``canvas.png`` (the burnt panel as a person sees it),
+``canvas_mask.png`` (the char map) and ``dots.csv`` into ``output_dir`` (if set).
 """
 
 import threading
@@ -98,6 +100,8 @@ PARAMETER_DOCS = {
     'lens.transmission': ('world lens transmission kappa [-]', 0.01, 1.0),
     'lens.facets': ("world lens facets: 'corrected' or 'spherical' (Eq 3)", None, None),
     'flux_rays': ('rays traced per spectral band set', 100, 10 ** 7),
+    'flux_rays_moving': ('rays per band traced instead while the lens keeps moving (same '
+                         'power, noisier spot)', 100, 10 ** 7),
     'beam_spread': ('world lens optical errors, Gaussian sigma per ray [rad]', 0.0, 0.1),
     'wood.density': ('wood density [kg/m^3]', 50.0, 2000.0),
     'wood.conductivity': ('wood conductivity across the grain (world y, depth) [W/(m K)]',
@@ -149,6 +153,8 @@ PARAMETER_DOCS = {
     'rgb.tone_curve': ("RGB tone curve: 'srgb' (webcams) or 'linear' [-]", None, None),
     'rgb.bayer': ('RGB through an RGGB Bayer mosaic and demosaicing [-]', None, None),
     'rgb.jpeg_quality': ('RGB JPEG compression quality, 1-100 (0: none) [-]', 0, 100),
+    'rgb.exact_read_out': ('RGB noise through the exact ADC and tone table, not linearised '
+                           'about each pixel (slower; Bayer sensors always) [-]', None, None),
     'thermal.width': ('thermal image width [px]', 8, 2048),
     'thermal.height': ('thermal image height [px]', 8, 2048),
     'thermal.horizontal_fov': ('thermal horizontal field of view [rad]', 0.1, 3.0),
@@ -183,7 +189,8 @@ class SimWorldNode(Node):
         self.truth_period = declare(self, 'truth_period', 1.0,
                                     'period of the sim/truth/* topics [s sim]', 0.01, 3600.0)
         self.output_dir = declare(self, 'output_dir', '',
-                                  'write canvas.png and dots.csv here at shutdown')
+                                  'write canvas.png, canvas_mask.png and dots.csv here at '
+                                  'shutdown')
         rig_file = rig_file_or_default(declare(
             self, RIG_FILE_PARAMETER, '',
             "the world's TRUE rig geometry YAML (empty: the workspace's config/rig.yaml)"))
@@ -237,6 +244,9 @@ class SimWorldNode(Node):
         self._plug(self.unplugged)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._next = {'rgb': 0.0, 'thermal': 0.0, 'canvas': 0.0, 'truth': 0.0}
+        # the intrinsics do not change: each CameraInfo is built once, restamped per frame
+        self._thermal_info = camera_info_from_camera(self.world.thermal.camera, None, 'thermal')
+        self._rgb_info = camera_info_from_camera(self.world.rgb.camera, None, 'rgb')
         self._pacer = Pacer(self.real_time_factor)
         lockstep_topic = declare(
             self, 'lockstep_topic', 'thermal/stats',
@@ -346,18 +356,19 @@ class SimWorldNode(Node):
         clock.clock = stamp
         self.clock_pub.publish(clock)
         if self._due('thermal', self.thermal_rate):
-            image = numpy_to_image(self.world.thermal_image(), '16UC1')
-            image.header.stamp, image.header.frame_id = stamp, 'thermal'
-            self.thermal_pub.publish(image)
-            self.thermal_info_pub.publish(camera_info_from_camera(self.world.thermal.camera,
-                                                                  stamp, 'thermal'))
+            if self.thermal_pub.get_subscription_count() > 0:
+                image = numpy_to_image(self.world.thermal_image(), '16UC1')
+                image.header.stamp, image.header.frame_id = stamp, 'thermal'
+                self.thermal_pub.publish(image)
+            self._thermal_info.header.stamp = stamp
+            self.thermal_info_pub.publish(self._thermal_info)
         if self._due('rgb', self.rgb_rate):
             if self.rgb_pub.get_subscription_count() > 0:
                 image = numpy_to_image(self.world.rgb_image(), 'rgb8')
                 image.header.stamp, image.header.frame_id = stamp, 'rgb'
                 self.rgb_pub.publish(image)
-            self.rgb_info_pub.publish(camera_info_from_camera(self.world.rgb.camera, stamp,
-                                                              'rgb'))
+            self._rgb_info.header.stamp = stamp
+            self.rgb_info_pub.publish(self._rgb_info)
             truth = PoseStamped()
             truth.header.stamp, truth.header.frame_id = stamp, 'world'
             truth.pose = matrix_to_pose(self.world.camera_poses()[0])
