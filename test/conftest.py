@@ -2,11 +2,17 @@
 
 import contextlib
 import os
+import signal
 
 from helio_control.bringup import simulated_graph, start_graph
 from helio_optics.node_kit.in_process_graph import InProcessGraph
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+# The node processes run in their own sessions (a terminal's Ctrl-C is for the test, which
+# then stops them). SIGTERM, as test.sh's HELIO_TEST_TIMEOUT sends it, would end pytest at
+# once and leave every started graph running; as Ctrl-C it runs the fixtures' teardown.
+signal.signal(signal.SIGTERM, signal.default_int_handler)
 
 
 @contextlib.contextmanager
