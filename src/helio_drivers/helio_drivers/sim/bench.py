@@ -50,7 +50,7 @@ import time
 from helio_drivers.sim.flux import irradiance_on_cells, lens_pose_in_world
 from helio_drivers.sim.truth import true_sun_focus_joints
 from helio_drivers.sim.world import SimSettings, SimWorld
-from helio_optics.bench_report import add_json_option, report
+from helio_optics.bench_report import add_json_option, median_call_ms, report
 from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
 from helio_optics.rig_kinematics import RigParameters
 import numpy as np
@@ -71,12 +71,7 @@ def _rig():
 
 def _cpu_ms(call, repeats):
     """Return the median CPU time of `call` [ms]."""
-    times = []
-    for _ in range(repeats):
-        start = time.process_time_ns()
-        call()
-        times.append(time.process_time_ns() - start)
-    return float(np.median(times)) / 1e6
+    return median_call_ms(call, repeats, clock=time.process_time)
 
 
 def _spin():
