@@ -19,6 +19,7 @@ each, so that the measured reaction is the graph's and not the pace of the simul
 
 import math
 import signal
+import threading
 
 from action_msgs.msg import GoalStatus
 from conftest import graph_of_processes
@@ -27,7 +28,7 @@ from helio_control.run_journal import read_journal
 from helio_drivers.sim.world import charred_dots_of, SimSettings
 from helio_msgs.action import PaintPattern
 from helio_msgs.msg import DeviceStatus, LightTruth, ThermalStats
-from helio_optics.node_kit.conversions import image_to_numpy
+from helio_optics.node_kit.conversions import image_to_numpy, stamp_to_seconds
 from helio_optics.node_kit.in_process_graph import TRANSIENT_LOCAL_QOS
 import numpy as np
 import pytest
@@ -54,11 +55,6 @@ ENDED = (GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STA
 def dots_along(y, count):
     """Return `count` world points along x at height y [m]."""
     return [Point(x=0.05 + i * PITCH, y=y, z=0.0) for i in range(count)]
-
-
-def stamp_s(stamp):
-    """Return a builtin_interfaces/Time as seconds."""
-    return stamp.sec + 1e-9 * stamp.nanosec
 
 
 class Rig:
@@ -97,12 +93,12 @@ class Rig:
     def now(self):
         """Return the latest simulated time seen on /clock (epoch seconds)."""
         self.clock.wait_for_count(1, 60.0)
-        return stamp_s(self.clock.messages[-1].clock)
+        return stamp_to_seconds(self.clock.messages[-1].clock)
 
     def wait_sim(self, seconds):
         """Wait until /clock has advanced by `seconds` of simulated time."""
         until = self.now() + seconds
-        self.clock.wait_until(lambda m: m and stamp_s(m[-1].clock) >= until, 60.0,
+        self.clock.wait_until(lambda m: m and stamp_to_seconds(m[-1].clock) >= until, 60.0,
                               f'/clock to pass {seconds} s further')
 
     def send(self, points, name, fresh=True, on_feedback=None):
@@ -115,7 +111,6 @@ class Rig:
 
     def heating(self, index=0, n_p=5):
         """Return (feedback callback, event set once dot `index` heats with N_p >= n_p)."""
-        import threading
         event = threading.Event()
 
         def on_feedback(message):
@@ -137,13 +132,10 @@ class Rig:
 
     def off_after(self, since, reference):
         """Return the first sim time after `since` at which the focus is off the wood."""
-        def off(messages):
-            return any(stamp_s(m.header.stamp) >= since
-                       and m.peak_irradiance < OFF_SHARE * reference for m in messages)
-        self.light.wait_until(off, 60.0, 'the focus off the wood')
-        first = next(m for m in self.light.messages if stamp_s(m.header.stamp) >= since
-                     and m.peak_irradiance < OFF_SHARE * reference)
-        return stamp_s(first.header.stamp), first.peak_irradiance / reference
+        first = self.light.wait_for_message(
+            lambda m: stamp_to_seconds(m.header.stamp) >= since
+            and m.peak_irradiance < OFF_SHARE * reference, 60.0)
+        return stamp_to_seconds(first.header.stamp), first.peak_irradiance / reference
 
     def charred_dots(self):
         """Return the world's charred dots from a sim/canvas image published after now."""
@@ -217,7 +209,7 @@ def test_a_stale_thermal_stream_puts_the_focus_off_the_wood_within_half_a_second
         thermal.signal(signal.SIGSTOP)
         rig.wait_sim(1.5 * THERMAL_STALE)
         rig.stats.wait_for_count(1, 60.0)
-        last = stamp_s(rig.stats.messages[-1].header.stamp)
+        last = stamp_to_seconds(rig.stats.messages[-1].header.stamp)
         return last + THERMAL_STALE                  # stale from here on (the watchdog)
 
     try:

@@ -259,10 +259,16 @@ class PainterNode(Node):
             self.wrist_now = dict(zip(message.name, message.position))
 
     def _silent_devices(self):
-        """Return the drivers whose joint states stopped (wall clock), as sentences."""
+        """Return {device: sentence} of the drivers whose joint states stopped (wall clock)."""
         now = time.monotonic()
-        return [f'{device} silent for {now - heard:.1f} s (no joint states: driver stopped?)'
-                for device, heard in self.heard.items() if now - heard > self.device_silence]
+        return {device: f'{device} silent for {now - heard:.1f} s (no joint states: driver '
+                        'stopped?)'
+                for device, heard in self.heard.items() if now - heard > self.device_silence}
+
+    def _wake_heating(self):
+        """Wake the heating loop's wait for thermal statistics: it checks and retreats."""
+        for waiter in list(self._stats_waiters):
+            waiter.offer(None)
 
     def _on_status(self, message):
         problem = ''
@@ -274,15 +280,13 @@ class PainterNode(Node):
             new = message.device not in self.faults
             self.faults[message.device] = problem
             if new:
-                for waiter in list(self._stats_waiters):
-                    waiter.offer(None)      # wake the heating loop: it retreats at once
+                self._wake_heating()
         else:
             self.faults.pop(message.device, None)
 
     def _on_cancel(self, _goal_handle):
         self._cancel_requested = True
-        for waiter in list(self._stats_waiters):
-            waiter.offer(None)              # wake the heating loop at once
+        self._wake_heating()
         return CancelResponse.ACCEPT
 
     # ---- waits and moves ------------------------------------------------------------------
@@ -332,8 +336,7 @@ class PainterNode(Node):
         if self._at_heating is None:
             return 'the lens was not at the heating distance'
         target, d_lp = self._at_heating
-        arm_fault = self.faults.get('dobot') or next(
-            (silent for silent in self._silent_devices() if silent.startswith('dobot')), None)
+        arm_fault = self.faults.get('dobot') or self._silent_devices().get('dobot')
         if arm_fault:                     # the arm cannot move: straight to the wrist
             failure = arm_fault
         else:
@@ -458,7 +461,7 @@ class PainterNode(Node):
     def _check(self):
         if self._cancel_requested:
             raise PaintCanceled()
-        faults = list(self.faults.values()) + self._silent_devices()
+        faults = list(self.faults.values()) + list(self._silent_devices().values())
         if faults:
             raise PaintFailed('device fault: ' + '; '.join(faults))
 

@@ -58,7 +58,7 @@ from helio_drivers.sim.devices import DeviceSettings, SimDevices
 from helio_drivers.sim.world import flat_settings, settings_from_flat, SimSettings, SimWorld
 from helio_msgs.msg import LightTruth, ThermalStats
 from helio_optics.node_kit.conversions import array_to_point, camera_info_from_camera
-from helio_optics.node_kit.conversions import matrix_to_pose, numpy_to_image
+from helio_optics.node_kit.conversions import matrix_to_pose, numpy_to_image, stamp_to_seconds
 from helio_optics.node_kit.deployment import rig_file_or_default, RIG_FILE_PARAMETER
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
@@ -237,11 +237,10 @@ class SimWorldNode(Node):
         self.truth_light_pub = self.create_publisher(LightTruth, 'sim/truth/light', TRUTH_QOS)
         self.truth_rgb_pub = self.create_publisher(PoseStamped, 'sim/truth/rgb_pose',
                                                    TRUTH_QOS)
-        self.unplugged = declare(
+        self._plug(declare(
             self, 'unplugged', [''],
             "Devices whose cable is out ('dobot', 'servo'); set at run time to unplug and "
-            'plug back in.', dynamic=True)
-        self._plug(self.unplugged)
+            'plug back in.', dynamic=True))
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._next = {'rgb': 0.0, 'thermal': 0.0, 'canvas': 0.0, 'truth': 0.0}
         # the intrinsics do not change: each CameraInfo is built once, restamped per frame
@@ -280,7 +279,7 @@ class SimWorldNode(Node):
     # ------------------------------------------------------------------ run-time controls
 
     def _on_set_parameters(self, parameters):
-        """Apply the run-time controls; refuse a change to anything fixed at start."""
+        """Apply the run-time controls (RUNTIME); refuse a malformed value with its reason."""
         # declarations pass here too; a set of a read-only parameter never does (rclpy)
         for parameter in parameters:
             try:
@@ -313,8 +312,7 @@ class SimWorldNode(Node):
 
     # ------------------------------------------------------------------ loop
     def _on_lockstep(self, message):
-        self._lockstep.seen(message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec,
-                            time.monotonic())
+        self._lockstep.seen(stamp_to_seconds(message.header.stamp), time.monotonic())
         self._lockstep_heard.set()
 
     def _run(self):
@@ -356,19 +354,11 @@ class SimWorldNode(Node):
         clock.clock = stamp
         self.clock_pub.publish(clock)
         if self._due('thermal', self.thermal_rate):
-            if self.thermal_pub.get_subscription_count() > 0:
-                image = numpy_to_image(self.world.thermal_image(), '16UC1')
-                image.header.stamp, image.header.frame_id = stamp, 'thermal'
-                self.thermal_pub.publish(image)
-            self._thermal_info.header.stamp = stamp
-            self.thermal_info_pub.publish(self._thermal_info)
+            self._publish_frame(self.thermal_pub, self.world.thermal_image, '16UC1',
+                                self.thermal_info_pub, self._thermal_info, stamp)
         if self._due('rgb', self.rgb_rate):
-            if self.rgb_pub.get_subscription_count() > 0:
-                image = numpy_to_image(self.world.rgb_image(), 'rgb8')
-                image.header.stamp, image.header.frame_id = stamp, 'rgb'
-                self.rgb_pub.publish(image)
-            self._rgb_info.header.stamp = stamp
-            self.rgb_info_pub.publish(self._rgb_info)
+            self._publish_frame(self.rgb_pub, self.world.rgb_image, 'rgb8', self.rgb_info_pub,
+                                self._rgb_info, stamp)
             truth = PoseStamped()
             truth.header.stamp, truth.header.frame_id = stamp, 'world'
             truth.pose = matrix_to_pose(self.world.camera_poses()[0])
@@ -379,6 +369,15 @@ class SimWorldNode(Node):
             self.canvas_pub.publish(image)
         if self._due('truth', 1.0 / self.truth_period):
             self._publish_truth(stamp)
+
+    def _publish_frame(self, image_pub, render, encoding, info_pub, info, stamp):
+        """Publish a camera's CameraInfo, and its image when someone subscribes to it."""
+        if image_pub.get_subscription_count() > 0:
+            image = numpy_to_image(render(), encoding)
+            image.header.stamp, image.header.frame_id = stamp, info.header.frame_id
+            image_pub.publish(image)
+        info.header.stamp = stamp
+        info_pub.publish(info)
 
     def _publish_truth(self, stamp):
         """Publish the true sun ray (robot frame) and the true T_robot_world."""
