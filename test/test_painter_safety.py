@@ -184,8 +184,12 @@ def test_a_30_s_cloud_mid_dot_is_waited_out_and_the_dot_finished_to_its_target(r
     assert diameters[0] == pytest.approx(diameters[1], rel=0.15)
 
 
-def _painting_interrupted(rig, name, y, interrupt):
-    """Start a one-dot painting, interrupt it at real time; return (off delay, handle)."""
+def _painting_interrupted(rig, name, y, interrupt, restore=lambda: None):
+    """
+    Start a one-dot painting, interrupt it at real time; return (off delay, handle).
+
+    `restore` undoes the interruption's cause before the world runs fast again.
+    """
     on_feedback, heating = rig.heating(index=0, n_p=5)
     handle = rig.send(dots_along(y, 1), name, on_feedback=on_feedback)
     rig.wait(heating, f'{name}: dot 0 heating', handle)
@@ -196,7 +200,10 @@ def _painting_interrupted(rig, name, y, interrupt):
         since = interrupt()
         off, share = rig.off_after(since, reference)
     finally:
-        rig.set_world(real_time_factor=0.0)
+        try:
+            restore()
+        finally:
+            rig.set_world(real_time_factor=0.0)
     print(f'\n{name}: focus off the wood {off - since:.2f} s (sim) after it, peak '
           f'irradiance down to {share * 100:.1f} % of the heating peak')
     return off - since, handle
@@ -212,10 +219,16 @@ def test_a_stale_thermal_stream_puts_the_focus_off_the_wood_within_half_a_second
         last = stamp_to_seconds(rig.stats.messages[-1].header.stamp)
         return last + THERMAL_STALE                  # stale from here on (the watchdog)
 
-    try:
-        delay, handle = _painting_interrupted(rig, 'stale', 0.08, stop_thermal)
-    finally:
+    def restart_thermal():
+        count = len(rig.stats.messages)
         thermal.signal(signal.SIGCONT)
+        rig.stats.wait_for_count(count + 1, 60.0)    # answering again: back in lockstep
+
+    try:
+        delay, handle = _painting_interrupted(rig, 'stale', 0.08, stop_thermal,
+                                              restore=restart_thermal)
+    finally:
+        thermal.signal(signal.SIGCONT)                # (again, if anything failed before)
     assert delay <= OFF_BOUND
     result = rig.graph.goal_result(handle, TIMEOUT).result    # it comes back: heated again
     print(f'stale: {result.message}')

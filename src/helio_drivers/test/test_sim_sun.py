@@ -144,13 +144,17 @@ def test_a_new_real_time_factor_paces_from_the_present_on():
 def test_lockstep_holds_the_world_at_most_lead_ahead_of_its_consumer_and_not_forever():
     lockstep = Lockstep(lead=0.35, timeout=1.0)
     assert not lockstep.hold(100.0, 0.0)           # no consumer yet: free running
+    assert not lockstep.left_behind(100.0)         # (not paced: there is none to wait for)
     lockstep.seen(10.0, wall_now=5.0)
     assert not lockstep.hold(10.35, 5.1)           # within the lead
     assert lockstep.hold(10.36, 5.1)               # ahead of it: wait
     lockstep.seen(9.0, wall_now=5.2)               # a late answer does not move it back
     assert lockstep.hold(10.36, 5.3)
+    assert not lockstep.left_behind(6.1)
     assert not lockstep.hold(10.36, 6.3)           # silent for more than 1 s wall: go on
+    assert lockstep.left_behind(6.3)               # (the node paces itself at real time)
     lockstep.seen(10.3, wall_now=6.4)              # answering again: held again
+    assert not lockstep.left_behind(6.5)
     assert lockstep.hold(10.7, 6.5) and not lockstep.hold(10.6, 6.5)
     with pytest.raises(ValueError):
         Lockstep(lead=0.0)

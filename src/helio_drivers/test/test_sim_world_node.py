@@ -3,11 +3,13 @@
 import datetime
 import math
 import os
+import threading
+import time
 
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from helio_drivers.sim.world import flat_settings, SimSettings
 from helio_drivers.sim.world_node import PARAMETER_DOCS, SimWorldNode, TRUTH_QOS
-from helio_optics.node_kit.conversions import point_to_array, pose_to_matrix
+from helio_optics.node_kit.conversions import point_to_array, pose_to_matrix, stamp_to_seconds
 from helio_optics.node_kit.in_process_graph import InProcessGraph
 from helio_optics.rig_kinematics import default_rig_file
 import numpy as np
@@ -119,3 +121,47 @@ def test_clouds_and_unplugged_cables_are_set_at_run_time_and_the_rest_is_refused
         result, = node.set_parameters([Parameter('dni', value=500.0)])
         assert not result.successful and 'read-only' in result.reason
         assert node.world.sun.dni == clear
+
+
+def test_a_world_in_lockstep_waits_for_its_consumer_and_paces_itself_once_it_is_silent(tmp_path):
+    # A stand-in for the thermal monitor answers each thermal image with ThermalStats of its
+    # stamp, then stops answering (a SIGSTOPped process). In lockstep the world never gets
+    # more than lockstep_lead (+ one step) past the newest answer; left behind, it neither
+    # freezes nor runs free, but at lockstep_fallback_factor.
+    from helio_msgs.msg import ThermalStats
+    lead, fallback, timeout = 0.3, 2.0, 0.5
+    with InProcessGraph('probe') as graph:
+        node = graph.add(SimWorldNode(**graph.node_options(
+            real_time_factor=0.0, dobot_port=str(tmp_path / 'dobot'),
+            servo_port=str(tmp_path / 'servo'), rig_file=default_rig_file(), flux_rays=5000,
+            rgb_rate=0.0, lockstep_lead=lead, lockstep_timeout=timeout,
+            lockstep_fallback_factor=fallback)))
+        start = node.world.clock.start.timestamp()
+        answering = threading.Event()
+        answering.set()
+        answered, ahead = [], []      # stamps answered; world time past the newest one [s]
+        stats = graph.helper.create_publisher(ThermalStats, 'thermal/stats', 10)
+
+        def answer(image):
+            if not answering.is_set():
+                return
+            if answered:              # the world has seen answers up to answered[-1] only
+                ahead.append(node.world.time - answered[-1])
+            out = ThermalStats()
+            out.header = image.header
+            stats.publish(out)
+            answered.append(stamp_to_seconds(image.header.stamp) - start)
+
+        graph.helper.create_subscription(Image, 'thermal/image_raw', answer,
+                                         qos_profile_sensor_data)
+        graph.wait_until(lambda: len(answered) > 40, timeout=120.0, what='40 answers')
+        # in step (the first answers came after a free-running start): within the lead
+        assert max(ahead[-20:]) <= lead + node.world.settings.step + 1e-6, ahead[-20:]
+        answering.clear()                                # the consumer goes silent
+        silent_at, wall = node.world.time, time.monotonic()
+        graph.wait_until(lambda: node.world.time > silent_at + 3.0, timeout=60.0,
+                         what='the world going on without its consumer')
+        elapsed = time.monotonic() - wall
+        # held for the timeout, then paced at 2x: 3 s simulated take >= timeout + 1.5 s
+        assert elapsed >= timeout + 3.0 / fallback - 0.2, f'{elapsed:.2f} s wall: ran free'
+        assert node._was_left_behind

@@ -110,8 +110,9 @@ class Lockstep:
     ``thermal/stats`` for each thermal image). ``hold`` says to wait while the world is more
     than `lead` simulated seconds ahead of the newest such stamp, as a robot's real sensors
     never run ahead of its software. A consumer silent for `timeout` wall seconds (stopped,
-    crashed, not started) is left behind until it answers again, so it cannot freeze the
-    world.
+    crashed) is left behind until it answers again, so it cannot freeze the world; the world
+    node then paces itself at real time (``left_behind``), as the world of a real robot whose
+    perception stopped would go on.
     """
 
     def __init__(self, lead=0.2, timeout=1.0):
@@ -129,6 +130,10 @@ class Lockstep:
 
     def hold(self, sim_now, wall_now):
         """Return whether the world should wait before simulating past `sim_now` [s]."""
-        if self._stamp is None or wall_now - self._heard > self.timeout:
+        if self._stamp is None or self.left_behind(wall_now):
             return False
         return sim_now - self._stamp > self.lead
+
+    def left_behind(self, wall_now):
+        """Return whether a consumer that answered before has been silent past the timeout."""
+        return self._stamp is not None and wall_now - self._heard > self.timeout

@@ -42,7 +42,8 @@ answer to each thermal image), as real sensors never run ahead of the software r
 them; otherwise, on 2 busy cores, the painter's fire-safety watchdog (0.5 s of simulated
 time without thermal data) would trip on a world that merely ran ahead. A consumer silent
 for ``lockstep_timeout`` of wall time is left behind, so a stopped one cannot freeze the
-world.
+world; the world then runs at ``lockstep_fallback_factor`` (real time), not as fast as it
+can, which would outrun the drivers' wall-clock polling and starve its own emulators.
 
 Topic names are relative, so the world runs under a namespace with its rig's nodes.
 At shutdown it writes ``canvas.png`` (the burnt panel as a person sees it),
@@ -258,6 +259,13 @@ class SimWorldNode(Node):
                     0.05, 60.0),
             declare(self, 'lockstep_timeout', 1.0,
                     'A lockstep_topic silent this long is left behind [s wall]', 0.05, 60.0))
+        # a world as fast as possible whose consumer went silent runs at this pace, not free:
+        # free, it would outrun the drivers' wall-clock polling and starve its own emulators
+        self._left_behind_pacer = Pacer(declare(
+            self, 'lockstep_fallback_factor', 1.0,
+            'Real-time factor while lockstep_topic is silent past lockstep_timeout (at '
+            'real_time_factor 0) [simulated s per wall s]', 0.01, 1000.0))
+        self._was_left_behind = False
         self._lockstep_heard = threading.Event()
         if lockstep_topic:
             self.create_subscription(
@@ -322,7 +330,7 @@ class SimWorldNode(Node):
                 self._lockstep_heard.wait(0.01)      # woken by the consumer's next output
                 self._lockstep_heard.clear()
                 continue
-            delay = self._pacer.delay(time.monotonic(), self.world.time)
+            delay = self._pace().delay(time.monotonic(), self.world.time)
             if delay > 0.0 and self._stop.wait(delay):
                 break
             try:
@@ -337,6 +345,22 @@ class SimWorldNode(Node):
                 self.get_logger().error(f'sim step failed: {error!r}', throttle_duration_sec=5.0)
             self.achieved_real_time_factor = self._pacer.achieved(time.monotonic(),
                                                                   self.world.time)
+
+    def _pace(self):
+        """Return the pacer in force: the fallback one while a lockstep consumer is silent."""
+        left_behind = self.real_time_factor <= 0.0 and self._lockstep.left_behind(
+            time.monotonic())
+        if left_behind != self._was_left_behind:
+            self._was_left_behind = left_behind
+            if left_behind:
+                self._left_behind_pacer.set_real_time_factor(
+                    self._left_behind_pacer.real_time_factor)      # restart its reference
+                self.get_logger().warning(
+                    f'lockstep_topic silent for {self._lockstep.timeout:g} s: running at '
+                    f'{self._left_behind_pacer.real_time_factor:g}x real time until it answers')
+            else:
+                self.get_logger().info('lockstep_topic answers again: in lockstep')
+        return self._left_behind_pacer if left_behind else self._pacer
 
     def _stamp(self):
         nanoseconds = self.world.clock.nanoseconds()
