@@ -98,15 +98,20 @@ def test_the_window_rule_paints_faster_than_the_papers_with_dots_as_even(paintin
         assert result.success, result.message
         assert result.dots_burnt == ROW
         assert [d.outcome for d in dots] == ['burnt'] * ROW
-        # a dot's cycle: from the start of its move to the start of the next one's
+        # a dot's cycle: from the start of its move to the start of the next one's; a dot
+        # heated again (its heating broken off by a stale thermal stream on the loaded
+        # machine) is not a cycle of either rule, and is left out
         starts = [d.start for d in dots] + [dots[-1].end]
-        cycles[rule] = float(np.mean(np.diff(starts)))
+        clean = [b - a for d, a, b in zip(dots, starts, starts[1:]) if d.restarts == 0]
+        assert len(clean) >= ROW // 2, f'{rule}: {ROW - len(clean)} of {ROW} dots heated again'
+        cycles[rule] = float(np.mean(clean))
         charred = dots_at(painting.charred_dots(), targets)
         assert all(dot is not None for dot in charred), f'{rule}: a dot is not charred'
         errors = [math.hypot(d.x - t.x, d.y - t.y) for d, t in zip(charred, targets)]
         diameters = np.array([d.diameter for d in charred])
         spreads[rule] = float(np.std(diameters) / np.mean(diameters))
-        print(f'{rule} rule: {cycles[rule]:.1f} s per dot (sim), dwell '
+        print(f'{rule} rule: {cycles[rule]:.1f} s per dot (sim, {len(clean)} of {ROW} dots '
+              f'not heated again), dwell '
               f'{np.mean([d.dwell for d in dots]):.1f} s, placement error mean '
               f'{np.mean(errors) * 1e3:.3f} mm, max {np.max(errors) * 1e3:.3f} mm, diameter '
               f'{np.mean(diameters) * 1e3:.2f} mm, CV {spreads[rule] * 100:.1f} %')

@@ -158,6 +158,19 @@ class DotCycle:
             return self._finish(now)
         return Decision.WAIT
 
+    def update_unread(self, now):
+        """
+        Take a frame at `now` [s] that has no reading of the dot; return the Decision.
+
+        E.g. the window rule's frame whose camera pose is unknown: only the time limit
+        applies (HEAT, or RETREAT with outcome 'max_heating' past ``max_heating``).
+        """
+        if self.phase is not Phase.HEATING:
+            raise RuntimeError(f'update_unread in phase {self.phase.value}')
+        if now - self.heating_started > self.settings.max_heating:
+            return self._retreat(now, 'max_heating')
+        return Decision.HEAT
+
     def _sun_lost(self, now, n_p, t_max, cap, sun_seen):
         """Return why the sun seems gone ('' while it shines), see the module docstring."""
         settings = self.settings

@@ -610,7 +610,8 @@ class PainterNode(Node):
         start = self._now()
         record = {'index': int(index), 'target': [float(target[0]), float(target[1])],
                   'n_p_target': n_p_target, 'start': start, 'end': start, 'dwell': 0.0,
-                  'peak_n_p': 0, 't_max': -273.15, 'outcome': 'burnt', 'reason': ''}
+                  'peak_n_p': 0, 't_max': -273.15, 'outcome': 'burnt', 'reason': '',
+                  'restarts': 0}
         d_heat = self.heating_distance
         if dry_run:
             feedback.phase = 'moving'
@@ -638,21 +639,30 @@ class PainterNode(Node):
             cycle.start_heating(self._now())
             feedback.phase = 'heating'
             decision = Decision.HEAT
-            stale = False
+            stale = ''                 # why the watchdog retreated, if it did
             blind_since = None         # window rule: since when the window had no figures
             while decision is Decision.HEAT:
                 stats = await self._next_stats()
                 self._check()
                 if stats is None:
-                    stale = True       # the watchdog: off the wood at once, below
+                    stale = 'no thermal statistics'   # the watchdog: off the wood, below
                     break
                 if window and not stats.window_valid:
-                    # no thermal camera pose for this image: its N_p would be the whole
-                    # image's (the last dot's afterglow too), so it is no reading; no
-                    # reading for longer than thermal_stale is a stale stream (watchdog)
+                    # no thermal camera pose for this image (joint states too far from its
+                    # stamp): no window reading. The image is fresh, and the window lies in
+                    # it, so the dot cannot be done while the whole image's N_p is below its
+                    # target: heat on. Otherwise the image's N_p (the last dot's afterglow
+                    # too) says nothing, and no reading for longer than thermal_stale is a
+                    # stale stream (watchdog)
+                    n_p, t_max = _readings(stats, window)          # the image's
+                    record['t_max'] = max(record['t_max'], float(t_max))
+                    if n_p < n_p_target:
+                        blind_since = None
+                        decision = cycle.update_unread(self._now())   # max_heating only
+                        continue
                     blind_since = self._now() if blind_since is None else blind_since
                     if self._now() - blind_since > self.thermal_stale:
-                        stale = True
+                        stale = 'no window reading (thermal camera pose unknown)'
                         break
                     continue
                 blind_since = None
@@ -674,15 +684,18 @@ class PainterNode(Node):
             if stale:
                 self.get_logger().error(
                     f'dot {index}: thermal statistics stale for more than '
-                    f'{self.thermal_stale:g} s while heating: retreated; waiting for them')
+                    f'{self.thermal_stale:g} s while heating ({stale}): retreated; waiting '
+                    'for them')
                 await self._wait_for_thermal(index)
                 self._thermal_interruptions += 1
+                record['restarts'] += 1
                 cycle.restart()
                 continue
             if decision is Decision.CLOUD:
                 self.get_logger().warning(f'dot {index}: sun lost ({cycle.cloud_reason}); '
                                           'waiting for it')
                 result.cloud_wait += await self._wait_for_sun(goal_handle, feedback)
+                record['restarts'] += 1
                 cycle.restart()
                 continue
             break

@@ -7,9 +7,10 @@ The run journal: what a painting did, one JSON object per line, written as it ha
 1. ``{"kind": "run", "goal": {...}, "started": <sim s>, "wall_started": <unix s>}``: the
    PaintPattern goal's fields (``goal_to_dict``) and when the run began;
 2. one ``{"kind": "dot", "index", "target": [x, y], "n_p_target", "start", "end", "dwell",
-   "peak_n_p", "t_max", "outcome", "reason"}`` per dot as it finishes (times in simulated or
-   ROS seconds, ``dwell`` the heating time [s], ``t_max`` [degC], ``target`` world [m],
-   ``outcome`` one of ``burnt``, ``skipped``, ``failed``);
+   "peak_n_p", "t_max", "outcome", "reason", "restarts"}`` per dot as it finishes (times in
+   simulated or ROS seconds, ``dwell`` the heating time [s], ``t_max`` [degC], ``target``
+   world [m], ``outcome`` one of ``burnt``, ``skipped``, ``failed``, ``restarts`` the
+   heatings broken off and begun again: a stale thermal stream, a cloud; 0 when absent);
 3. ``{"kind": "result", "success", "dots_burnt", "dots_skipped", "duration",
    "wall_duration", "message"}`` at the end.
 
@@ -18,7 +19,7 @@ reader accepts a last line cut off by a crash (``Journal.truncated``) and refuse
 else malformed with the line number. Pure Python: no rclpy.
 """
 
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, MISSING
 import json
 import math
 import os
@@ -72,6 +73,7 @@ class DotRecord:
     t_max: float                # [degC] highest T_max while heating
     outcome: str                # 'burnt', 'skipped' or 'failed'
     reason: str = ''
+    restarts: int = 0           # heatings broken off and begun again (stale stream, cloud)
     kind: str = field(default='dot', init=False)
 
     def validate(self):
@@ -83,6 +85,7 @@ class DotRecord:
         self.target = [_number(record, 'target', value) for value in self.target]
         self.n_p_target = _number(record, 'n_p_target', self.n_p_target, integer=True)
         self.peak_n_p = _number(record, 'peak_n_p', self.peak_n_p, integer=True)
+        self.restarts = _number(record, 'restarts', self.restarts, integer=True)
         for name in ('start', 'end', 'dwell', 't_max'):
             setattr(self, name, _number(record, name, getattr(self, name)))
         if self.outcome not in OUTCOMES:
@@ -130,7 +133,8 @@ def record_from_dict(data):
         raise JournalError(f'unknown kind {kind!r} (expected one of {sorted(RECORDS)})')
     record_type = RECORDS[kind]
     names = {f.name for f in fields(record_type) if f.init}
-    required = {name for name in names if name not in ('reason', 'message')}
+    required = {f.name for f in fields(record_type)
+                if f.init and f.default is MISSING and f.default_factory is MISSING}
     missing = required - set(data)
     if missing:
         raise JournalError(f'{kind} line misses {sorted(missing)}')

@@ -44,6 +44,20 @@ def test_a_dot_held_past_its_longest_heating_is_given_up():
     assert decisions[10] is Decision.RETREAT and cycle.outcome == 'max_heating'
 
 
+def test_frames_without_a_reading_keep_the_time_limit_and_nothing_else():
+    # the window rule's frames whose camera pose is unknown: they neither end the heating
+    # nor look like a cloud (no falling N_p), but the dot is still given up in time
+    cycle = DotCycle(CycleSettings(n_p_target=30, max_heating=1.0))
+    cycle.start_heating(0.0)
+    assert cycle.update(0.1, 20, 150.0) is Decision.HEAT
+    assert [cycle.update_unread(0.1 * i) for i in range(2, 10)] == [Decision.HEAT] * 8
+    assert cycle.peak_n_p == 20 and cycle.clouds == 0
+    assert cycle.update(0.95, 22, 151.0) is Decision.HEAT
+    assert cycle.update_unread(1.1) is Decision.RETREAT and cycle.outcome == 'max_heating'
+    with pytest.raises(RuntimeError):
+        cycle.update_unread(1.2)                      # not heating any more
+
+
 @pytest.mark.parametrize('readings, words', [
     ([(0, 90.0), (0, 130.0), (0, 150.0), (0, 144.0)], 'T_max fell from 150.0 to 144.0'),
     ([(0, CAP), (8, CAP), (14, CAP), (10, CAP)], 'N_p fell from 14 to 10'),

@@ -21,7 +21,8 @@ def test_a_journal_reads_back_what_was_written_and_each_line_is_on_disk_at_once(
         writer.dot(**DOT)
         # flushed per line: another reader sees both lines while the writer is open
         assert len(path.read_text().splitlines()) == 2
-        writer.dot(**{**DOT, 'index': 1, 'outcome': 'skipped', 'reason': 'unreachable'})
+        writer.dot(**{**DOT, 'index': 1, 'outcome': 'skipped', 'reason': 'unreachable',
+                      'restarts': 2})
         writer.result(success=False, dots_burnt=1, dots_skipped=1, duration=40.0,
                       wall_duration=12.5, message='1 dot unreachable')
     journal = read_journal(str(path))
@@ -30,12 +31,21 @@ def test_a_journal_reads_back_what_was_written_and_each_line_is_on_disk_at_once(
     assert journal.run.started == 100.0
     assert [d.index for d in journal.dots] == [0, 1]
     assert journal.dots[0].target == [0.06, 0.062] and journal.dots[0].dwell == 18.2
-    assert journal.dots[1].reason == 'unreachable'
+    assert journal.dots[1].reason == 'unreachable' and journal.dots[1].restarts == 2
+    assert journal.dots[0].restarts == 0
     assert journal.result.dots_burnt == 1 and journal.result.success is False
     assert not journal.truncated
     # every line is one JSON object with the documented keys
     first, *_ = [json.loads(line) for line in path.read_text().splitlines()]
     assert set(first) == {'kind', 'goal', 'started', 'wall_started'}
+
+
+def test_a_dot_line_from_before_restarts_were_counted_reads_as_none(tmp_path):
+    path = tmp_path / 'journal.jsonl'
+    path.write_text(json.dumps({'kind': 'run', 'goal': {}, 'started': 0.0,
+                                'wall_started': 0.0}) + '\n'
+                    + json.dumps({**DOT, 'kind': 'dot'}) + '\n')
+    assert read_journal(str(path)).dots[0].restarts == 0
 
 
 def test_a_line_cut_off_by_a_crash_is_flagged_and_the_finished_dots_kept(tmp_path):

@@ -190,8 +190,11 @@ class ThermalMonitorNode(Node):
             return None, None
         if self.camera is None or (self.camera.height, self.camera.width) != tuple(shape):
             return None, None
-        joints = self.joints.at(stamp, self.joint_state_tolerance).positions
+        lookup = self.joints.at(stamp, self.joint_state_tolerance)
+        joints = lookup.positions
         if joints is None:
+            self.get_logger().warn(f'thermal camera pose unknown (no window, no hottest point): '
+                                   f'{lookup.reason}', throttle_duration_sec=10.0)
             return None, None
         T_robot_world = self.rig.parameters.T_robot_world
         pose = self.rig.forward(joints)
