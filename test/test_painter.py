@@ -118,9 +118,10 @@ def test_the_window_rule_paints_faster_than_the_papers_with_dots_as_even(paintin
         assert np.mean(errors) <= 0.3e-3
     saved = 1.0 - cycles['window'] / cycles['paper']
     print(f'the window rule saves {saved * 100:.0f} % per dot')
-    # Issue 13 asks for 15 %. Here the paper's rule spends ~5 s per dot beside the heating
-    # (retreat, the wait for N_p = 0, travel, approach), the window rule ~1.9 s (its move to
-    # the next dot starts with the retreat); the heating, ~17 s of a ~22 s cycle, is the
-    # same for both, so the saving measures 13-14 %: short of it.
+    # Issue 13 asks for 15 %. Here the paper's rule spends 5.3-7.0 s per dot beside the
+    # heating (retreat, the wait for N_p = 0, travel, approach), the window rule 2.1-2.3 s
+    # (its move to the next dot starts with the retreat); the heating, 16.3-17.1 s of a
+    # ~22 s cycle, is the same process in both but varies by up to 0.8 s between runs, so
+    # the saving measured 13, 17 and 20 % in three runs: 15 % is not met every time.
     assert saved >= 0.10
     assert spreads['window'] <= max(spreads['paper'], 0.10)
