@@ -27,7 +27,9 @@ Beyond the paper:
   retreats at once (``focus`` at the retreat distance; if the arm cannot move, the wrist
   turns the lens off the sun). A stale stream then gets ``thermal_back_timeout`` to come
   back (the dot is heated again from the start, and the result counts it); everything
-  else ends the goal saying why;
+  else ends the goal saying why. A window-rule frame without a camera pose is fresh data
+  without a window reading: heat on while the image's N_p is below the target (the window
+  lies in the image), else it counts towards ``thermal_stale``;
 - **resume**: every finished dot is appended (and flushed) to the run's ``journal.jsonl``;
   the same goal sent again continues an unfinished run at its first unburnt dot, with the
   same plan, none lost and none doubled (``fresh`` starts over; ``start_index`` skips the
