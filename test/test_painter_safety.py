@@ -10,8 +10,9 @@ and ``sim/canvas``: the char map), never by what the painter says about itself:
 - a stale thermal stream (``thermal_monitor`` stopped with SIGSTOP), an unplugged Dobot
   (``unplugged`` on ``sim_world``: its pty closes as on a USB unplug) and a cancel each put
   the focus off the wood within 0.5 s of simulated time;
-- the painter killed (SIGKILL) mid-painting and the same goal sent again to a new painter
-  completes the picture with no dot lost and none burnt twice.
+- the painter killed (SIGKILL) mid-painting: the lens planner's focus lease puts the focus
+  off the wood within the lease (1 s) plus 0.5 s, and the same goal sent again to a new
+  painter completes the picture with no dot lost and none burnt twice.
 
 The world runs as fast as it can between the events and at real time (factor 1) around
 each, so that the measured reaction is the graph's and not the pace of the simulation.
@@ -49,6 +50,7 @@ OFF_BOUND = 0.5               # issue 13: focus off the wood within this [s of s
 # the peak while heating (the 3 cm retreat spreads the light over ~20x the area).
 OFF_SHARE = 0.25
 THERMAL_STALE = 0.5           # the painter's default thermal_stale [s]
+LEASE = 1.0                   # the lens planner's default lease_timeout [s]
 ENDED = (GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED)
 
 
@@ -293,12 +295,19 @@ def test_a_killed_painter_resumes_with_no_dot_lost_or_burnt_twice(rig):
     on_feedback, third_dot = rig.heating(index=2, n_p=10)
     first = rig.send(targets, 'killed', on_feedback=on_feedback)
     rig.wait(third_dot, 'dot 2 heating', first)
-    # Nothing can retreat the lens of a killed painter: the world nearly stops meanwhile
-    # (0.01 s per wall second), or dot 2 would burn on through the restart.
-    rig.set_world(real_time_factor=0.01)
+    # A killed painter cannot retreat its lens: its heartbeat stops, and the lens planner's
+    # focus lease (lease_timeout 1 s of node clock and 0.5 s wall) retreats the lens
+    rig.set_world(real_time_factor=1.0)
     try:
+        rig.wait_sim(0.3)                         # paced from here on
+        reference = rig.heating_peak()
+        since = rig.now()
         painter.signal(signal.SIGKILL)
         painter.process.wait(30.0)
+        off, share = rig.off_after(since, reference)
+        print(f'\nkilled: focus off the wood {off - since:.2f} s (sim) after the kill, peak '
+              f'irradiance down to {share * 100:.1f} % of the heating peak')
+        assert off - since <= LEASE + OFF_BOUND
         # a request sent before the new server matched would be lost: the old one must be
         # gone from the graph first (DDS notices a killed participant within its lease)
         rig.graph.wait_until(lambda: not rig.client.server_is_ready(), 120.0,

@@ -34,10 +34,12 @@ spot stream and node-clock timers; nothing blocks, and the node runs in a plain
 import datetime
 import math
 import os
+import time
 import traceback
 
 from geometry_msgs.msg import PoseStamped
 from helio_control import lens_moves, sun_sweep
+from helio_control.focus_lease import FocusLease
 from helio_control.world_calibration import estimate_world_in_robot
 from helio_msgs.action import (CalibrateFocus, CalibrateWorld, FocusLens, MoveArm, MoveWrist,
                                SweepSun)
@@ -59,10 +61,12 @@ from helio_optics.node_kit.runner import run_node
 from helio_optics.spot import spot_area_at
 import numpy as np
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, JointState
+from std_msgs.msg import Header
 import yaml
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -76,6 +80,15 @@ class GoalFailed(Exception):
 
 class GoalCanceled(Exception):
     """The goal was canceled while it ran."""
+
+
+class _Unattended:
+    """The goal handle of a move no client asked for (the lease's retreat): never canceled."""
+
+    is_cancel_requested = False
+
+
+UNATTENDED = _Unattended()
 
 
 class SpotWaiter:
@@ -207,6 +220,21 @@ class LensPlannerNode(Node):
                                                      LATCHED)
         self.focus_publisher = self.create_publisher(FocalCalibration, 'calibration/focus',
                                                      LATCHED)
+        lease_topic = declare(
+            self, 'lease_topic', 'painter/heartbeat',
+            'std_msgs/Header heartbeat of the client a focus at the heating distance is held '
+            'for (the painter): silent past both lease timeouts, the lens is retreated '
+            "('': off)")
+        self.lease = FocusLease(
+            declare(self, 'lease_timeout', 1.0,
+                    'Heartbeat silence (node clock) after which a lens left at the heating '
+                    'distance is retreated, with lease_timeout_wall [s].', 0.05, 60.0),
+            declare(self, 'lease_timeout_wall', 0.5,
+                    'The same silence in wall time (both must pass) [s].', 0.05, 60.0))
+        if lease_topic:
+            self.create_subscription(Header, lease_topic, self._on_heartbeat, 10)
+            self.create_timer(0.05, self._check_lease,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.arm = ActionClient(self, MoveArm, 'move_arm')
         self.wrist = ActionClient(self, MoveWrist, 'move_wrist')
         self.estimator = self.create_client(EstimateSun, 'estimate_sun')
@@ -231,6 +259,39 @@ class LensPlannerNode(Node):
         problem = self.joints.add_message(message)
         if problem:
             self.get_logger().warning(problem, throttle_duration_sec=5.0)
+
+    def _on_heartbeat(self, _message):
+        self.lease.heard(self._now(), time.monotonic())
+
+    def _check_lease(self):
+        """Retreat a lens left at the heating distance by a client that went silent."""
+        now, wall_now = self._now(), time.monotonic()
+        if self._busy or not self.lease.expired(now, wall_now):
+            return
+        silence, wall_silence = self.lease.silence(now, wall_now)
+        self.lease.disarm()
+        self._busy = True
+        self.get_logger().error(
+            f'the heartbeat of the client the lens is focused for is silent ({silence:.2f} s '
+            f'node clock, {wall_silence:.2f} s wall): retreating the lens')
+        self.executor.create_task(self._lease_retreat())
+
+    async def _lease_retreat(self):
+        """Move the lens along the sun ray to the travel distance over where it focuses."""
+        try:
+            x_now = self._present_joints()
+            here, _ = lens_moves.focus_point(self.rig, x_now, self._sun_ray(),
+                                             self.rig.parameters.T_robot_world)
+            if here is None:
+                raise GoalFailed('the lens does not face the panel: nothing to retreat')
+            legs, _ = self._plan_focus(here, self.travel_distance)
+            for leg in legs:
+                await self._move(UNATTENDED, leg.x)
+            self.get_logger().warning('lens retreated: the lease of its client expired')
+        except (GoalFailed, GoalCanceled) as error:
+            self.get_logger().error(f'the lens could not be retreated: {error}')
+        finally:
+            self._busy = False
 
     def _on_sun(self, message):
         if message.converged:
@@ -267,6 +328,8 @@ class LensPlannerNode(Node):
                 goal_handle.abort()
                 return result
             self._busy = True
+            if action_type is not FocusLens:
+                self.lease.disarm()       # its own procedure: no client's focus to guard
             try:
                 await execute(goal_handle, result)
                 result.success = True
@@ -393,17 +456,10 @@ class LensPlannerNode(Node):
         d_lp = goal.d_lp if goal.d_lp != 0.0 else self.heating_distance
         if not (math.isfinite(d_lp) and d_lp > 0.0):
             raise GoalFailed(f'd_lp must be a finite distance > 0 m, got {goal.d_lp}')
-        sun = self._sun_ray()
-        x_now = self._present_joints()
-        T_robot_world = self.rig.parameters.T_robot_world
-        try:
-            legs = lens_moves.plan_focus_moves(
-                self.targeting, x_now, target, d_lp, sun, T_robot_world, self.heating_distance,
-                (self.travel_distance, self.heating_distance + self.safe_margin,
-                 self.heating_distance - self.safe_margin), self.safe_margin, self.same_point)
-        except (lens_moves.MovePlanningError, ValueError) as error:
-            raise GoalFailed(str(error)) from None
-        solution = self.targeting.aim(target, sun, d_lp, T_robot_world)
+        alive = self.lease.alive(self._now(), time.monotonic())   # a client to outlive?
+        legs, x_now = self._plan_focus(target, d_lp)
+        solution = self.targeting.aim(target, self._sun_ray(), d_lp,
+                                      self.rig.parameters.T_robot_world)
         feedback = FocusLens.Feedback()
         feedback.commanded = self._lens_pose(legs[-1].x, d_lp)
         reached = x_now
@@ -414,6 +470,7 @@ class LensPlannerNode(Node):
                 - self.rig.forward(reached).T_robot_lens[:3, 3]))
             goal_handle.publish_feedback(feedback)
             reached = await self._move(goal_handle, leg.x)
+        self.lease.placed(abs(d_lp - self.heating_distance) < self.safe_margin, alive)
         commanded = self.rig.forward(legs[-1].x).T_robot_lens[:3, 3]
         achieved = self.rig.forward(reached).T_robot_lens[:3, 3]
         result.achieved = self._lens_pose(reached, d_lp)
@@ -424,6 +481,20 @@ class LensPlannerNode(Node):
                           f'({", ".join(leg.name for leg in legs)}); aim corrected by '
                           f'{correction * 1e3:.3f} mm; lens within '
                           f'{result.position_error * 1e3:.3f} mm of the command')
+
+    def _plan_focus(self, target, d_lp):
+        """Return (legs, present joints) that bring the focus to `target` at `d_lp`."""
+        sun = self._sun_ray()
+        x_now = self._present_joints()
+        try:
+            legs = lens_moves.plan_focus_moves(
+                self.targeting, x_now, target, d_lp, sun,
+                self.rig.parameters.T_robot_world, self.heating_distance,
+                (self.travel_distance, self.heating_distance + self.safe_margin,
+                 self.heating_distance - self.safe_margin), self.safe_margin, self.same_point)
+        except (lens_moves.MovePlanningError, ValueError) as error:
+            raise GoalFailed(str(error)) from None
+        return legs, x_now
 
     # ---- robot-world calibration --------------------------------------------------------
 

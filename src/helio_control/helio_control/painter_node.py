@@ -71,6 +71,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -218,6 +219,15 @@ class PainterNode(Node):
         self.wrist_now = {}                # the servos' latest joint positions [rad]
         self.create_subscription(JointState, 'joint_states', self._on_joints, 20)
         self.window_publisher = self.create_publisher(PointStamped, 'thermal/window', LATCHED)
+        # the lens planner's focus lease (helio_control.focus_lease): while this heartbeat
+        # lives, a lens left at the heating distance is the painter's to watch; a painter
+        # killed outright stops it, and the lens planner retreats the lens
+        self.heartbeat_publisher = self.create_publisher(Header, 'painter/heartbeat', 10)
+        self.create_timer(
+            declare(self, 'heartbeat_period', 0.1,
+                    "Period of painter/heartbeat (wall clock), the lens planner's focus lease "
+                    '[s].', 0.01, 1.0),
+            self._beat, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.focus = ActionClient(self, FocusLens, 'focus')
         self.world = ActionClient(self, CalibrateWorld, 'calibrate_world')
         self.sweep = ActionClient(self, SweepSun, 'sweep_sun')
@@ -285,6 +295,11 @@ class PainterNode(Node):
                 self._wake_heating()
         else:
             self.faults.pop(message.device, None)
+
+    def _beat(self):
+        beat = Header()
+        beat.stamp = self.get_clock().now().to_msg()
+        self.heartbeat_publisher.publish(beat)
 
     def _on_cancel(self, _goal_handle):
         self._cancel_requested = True

@@ -1,0 +1,68 @@
+"""
+The focus lease: a lens left at the heating distance by a client that died is taken away.
+
+The painter's fire-safety watchdog (paper Algorithm 1 plus issue 13's rule: the lens never
+rests at the heating distance without fresh thermal data) lives in the painter; a painter
+killed outright (SIGKILL, a crash, the power of its computer) cannot retreat, and the lens
+would stay focused on one spot. So the painter publishes a heartbeat while it lives, and the
+lens planner, which placed the lens, holds a lease on that heartbeat:
+
+- a ``focus`` goal that ends at the heating distance while the heartbeat was alive when the
+  goal began arms the lease (a goal from a client without heartbeat, e.g. an operator's
+  ``ros2 action send_goal``, never does);
+- a move off the heating distance disarms it;
+- an armed lease whose heartbeat has been silent for ``timeout`` on the node clock *and*
+  ``wall_timeout`` of wall time has expired: the lens planner retreats the lens. Both
+  clocks, so that neither a simulated world running 10x faster than the painter's process
+  (a heartbeat 0.1 s of simulated time late is 10 ms of wall time) nor a paused one makes
+  the lease expire while the painter is alive.
+
+Pure Python: no rclpy. Times in seconds.
+"""
+
+import math
+
+
+class FocusLease:
+    """Whether the lens at the heating distance is still held for a live client."""
+
+    def __init__(self, timeout=1.0, wall_timeout=0.5):
+        """Expire after `timeout` [s node clock] and `wall_timeout` [s wall] of silence."""
+        if not (timeout > 0.0 and wall_timeout > 0.0):
+            raise ValueError(f'lease timeouts must be > 0 s, got {timeout} and {wall_timeout}')
+        self.timeout, self.wall_timeout = float(timeout), float(wall_timeout)
+        self._heard = (-math.inf, -math.inf)       # (node clock, wall) of the last heartbeat
+        self.armed = False
+
+    def heard(self, now, wall_now):
+        """Note a heartbeat at `now` (node clock) and `wall_now` (wall) [s]."""
+        self._heard = (float(now), float(wall_now))
+
+    def alive(self, now, wall_now):
+        """Return whether the heartbeat has been heard within either timeout."""
+        return not self._silent(now, wall_now)
+
+    def placed(self, at_heating, alive_when_asked):
+        """
+        Note where a ``focus`` goal left the lens.
+
+        `at_heating`: at the heating distance (within the safe margin); `alive_when_asked`:
+        the heartbeat was alive when the goal began (``alive`` then).
+        """
+        self.armed = bool(at_heating and alive_when_asked)
+
+    def disarm(self):
+        """Note that the lens left the heating distance (a retreat, another procedure)."""
+        self.armed = False
+
+    def expired(self, now, wall_now):
+        """Return whether the lens must be taken away now (armed, heartbeat silent)."""
+        return self.armed and self._silent(now, wall_now)
+
+    def silence(self, now, wall_now):
+        """Return (node clock, wall) seconds since the last heartbeat."""
+        return now - self._heard[0], wall_now - self._heard[1]
+
+    def _silent(self, now, wall_now):
+        node_silence, wall_silence = self.silence(now, wall_now)
+        return node_silence > self.timeout and wall_silence > self.wall_timeout
