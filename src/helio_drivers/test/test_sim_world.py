@@ -1,10 +1,11 @@
 """The simulated world end to end: clouds, determinism, canvas output, hosted devices."""
 
+import copy
 from dataclasses import replace
 import math
 
 import cv2
-from helio_drivers.sim.cameras import CHAR_RGB
+from helio_drivers.sim.cameras import CHAR_RGB, NoisyReadOut
 from helio_drivers.sim.truth import true_sun_focus_joints
 from helio_drivers.sim.world import settings_from_flat, SimSettings, SimWorld
 from helio_optics.ground_render import (decode_srgb8, GroundRenderer, GroundTexture,
@@ -100,14 +101,15 @@ def test_flat_parameters_round_trip_and_unknown_names_are_refused():
         SimWorld(replace(FAST, start_time='2026-06-21T10:00:00'), rig_parameters())
 
 
-def straightforward_rgb(world, light, attenuation):
+def straightforward_rgb(world, light, attenuation, rng=None):
     """
-    Return the noise-free RGB frame of the world rendered whole from scratch (the truth).
+    Return the RGB frame of the world rendered whole from scratch (the truth).
 
     The panel's light built pixel by pixel of the char raster (wood and marker from the
     texture generator, char colour, sky + attenuation x direct sun, the light window),
     every image pixel's ray cast onto it (no homography), then the webcam's optics and
-    read-out: nothing of the camera's kept state or partial renders.
+    read-out (with noise: the linearised read-out's, noise drawn by `rng`): nothing of the
+    camera's kept state or partial renders.
     """
     s = world.settings.rgb
     wood = decode_srgb8(make_panel_texture(
@@ -127,20 +129,27 @@ def straightforward_rgb(world, light, attenuation):
     T_world_rgb, _ = world.camera_poses()
     renderer = GroundRenderer(camera, supersample=1)
     radiance = renderer.radiance(T_world_rgb, texture, background=0.0)
-    webcam = Webcam(s.webcam(), camera)
-    return webcam.sensor(webcam.optics(radiance))
+    webcam = Webcam(s.webcam(world.settings.seed + 7), camera)
+    if rng is None:
+        return webcam.sensor(webcam.optics(radiance))
+    read_out = NoisyReadOut(webcam, (s.height, s.width, 3), world.settings.seed + 7)
+    return read_out.expose(read_out.prepare(webcam.optics(radiance)), rng)
 
 
-def test_kept_rgb_frames_of_a_painting_equal_a_straightforward_render():
+@pytest.mark.parametrize('noise', [False, True])
+def test_kept_rgb_frames_of_a_painting_equal_a_straightforward_render(noise):
     """
     The RGB camera's kept and partly redone frames against a whole render from scratch.
 
     Along a dot heated until it chars, under a cloud, after a move that re-centres the heat
     patch and while the next dot heats: the same frames within the ray cast's and the
-    homography's different bilinear rounding (both at 1/32 px): at most a level apart.
+    homography's different bilinear rounding (both at 1/32 px): at most a level apart. With
+    noise, the same noise (the same draws) on the same light.
     """
-    noise_free = replace(SimSettings().rgb, read_noise=0.0, full_well_electrons=0.0)
-    settings = replace(SimSettings(), rgb=noise_free)
+    settings = SimSettings()
+    if not noise:
+        settings = replace(settings, rgb=replace(settings.rgb, read_noise=0.0,
+                                                 full_well_electrons=0.0))
     world = SimWorld(settings, rig_parameters())
     dots = ([0.07, 0.07, 0.0], [0.076, 0.07, 0.0])
     world.set_joints(true_sun_focus_joints(world, dots[0], 0.082))
@@ -156,14 +165,18 @@ def test_kept_rgb_frames_of_a_painting_equal_a_straightforward_render():
             world.set_joints(true_sun_focus_joints(world, dots[1], 0.082))
         if k % 2:
             continue
+        draws = copy.deepcopy(world._rng) if noise else None
         frame = world.rgb_image()
         if now in checks:
             seen.add(checks[now])
             attenuation = world.dni_now() / world.sun.dni
-            expected = straightforward_rgb(world, world._light, attenuation)
+            expected = straightforward_rgb(world, world._light, attenuation, draws)
             difference = np.abs(frame.astype(int) - expected.astype(int))
-            # measured: at most 1 level apart, 3e-5 of a level on average
+            # measured: at most 1 level apart, under 1e-4 of a level on average
             assert difference.max() <= 2 and difference.mean() < 0.01, checks[now]
+            if noise:      # and the noise is there
+                assert np.abs(frame.astype(int) - straightforward_rgb(
+                    world, world._light, attenuation, np.random.default_rng(5))).mean() > 0.5
             # the spot: the same saturated pixels
             saturated = np.all(frame == 255, axis=2)
             assert np.array_equal(saturated, np.all(expected == 255, axis=2)), checks[now]

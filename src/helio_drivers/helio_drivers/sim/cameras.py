@@ -220,10 +220,22 @@ class NoisyReadOut:
                              -127, 127).astype(np.int8)
         self._product = None
 
-    def prepare(self, light):
-        """Return (level, gain) float32 for linear `light` on the sensor (after the optics)."""
+    def index_scale(self):
+        """Return the table steps per unit of linear light (for `prepare`'s `scale`)."""
+        return self.top * self.SUBCODES
+
+    def prepare(self, light, scale=None):
+        """
+        Return (level, gain) float32 for linear `light` on the sensor (after the optics).
+
+        `scale`: table steps per unit of light per pixel (`index_scale` x a gain the light
+        still needs, such as the vignetting: one pass for both), or None.
+        """
         light = np.asarray(light, dtype=np.float32)
-        index = light * np.float32(self.top * self.SUBCODES)
+        if scale is None:
+            index = light * np.float32(self.index_scale())
+        else:
+            index = np.multiply(light, scale, dtype=np.float32)
         np.clip(index, 0.0, float(self._last), out=index)
         index += np.float32(0.5)
         index = index.astype(np.intp)
@@ -273,13 +285,18 @@ class RgbCamera:
         self._attenuation = None    # the direct sun's share it was made for
         self._light_source = None   # the light window of the last frame
         self._window_box = None     # its raster box (r0, r1, c0, c1) and its light per unit
-        self._window_light = None   # albedo (exposure x irradiance, (h, w, 1), rows from y_max)
-        self._dirty = []            # raster boxes of `_lit` changed since `_frame` was made
-        self._frame = None          # the light on the sensor (after the optics) at `_pose`
-        self._prepared = None       # and its noise-free sensor stage
+        self._window_light = None   # albedo (exposure x irradiance, (h, w, 3), rows from y_max)
+        self._dirty = []            # raster boxes of `_lit` changed since `_prepared` was made
+        self._prepared = None       # the noise-free sensor stage of the frame at `_pose`
         self._pose = None
         self._view = None           # per-pose geometry (`_pose_view`)
         self._view_key = None
+        # the linearised read-out takes the vignetting with its table index (one pass)
+        vignette = self._webcam._vignette
+        self._index_scale = None
+        if self._read_out is not None and vignette is not None:
+            self._index_scale = np.ascontiguousarray(np.broadcast_to(
+                vignette * np.float32(self._read_out.index_scale()), (s.height, s.width, 3)))
         self.renders = {'frames': 0, 'whole': 0, 'parts': 0, 'light': 0}
 
     def update_char(self, char, box=None):
@@ -331,7 +348,7 @@ class RgbCamera:
         self.renders['frames'] += 1
         pose = np.asarray(T_world_camera, dtype=np.float64).tobytes()
         attenuation = float(attenuation)
-        whole = pose != self._pose or self._frame is None
+        whole = pose != self._pose or self._prepared is None
         if attenuation != self._attenuation:
             self._set_daylight(attenuation)
             whole = True
@@ -339,10 +356,8 @@ class RgbCamera:
             self._set_window(light)
         if whole:
             self.renders['whole'] += 1
-            self._frame = self._optics(self._radiance(T_world_camera, self._lit))
-            prepare = (self._webcam.prepare if self._read_out is None
-                       else self._read_out.prepare)
-            self._prepared = prepare(self._frame)
+            self._prepared = self._sensor_stage(self._blur(self._radiance(
+                T_world_camera, self._lit)), (0, 0, self.camera.width, self.camera.height))
             self._pose = pose
         else:
             for box in _merged_boxes(self._dirty):
@@ -390,8 +405,10 @@ class RgbCamera:
             rows, cols, lit = light
             # exposure x (sky + attenuation x lit) / (1 + sky), rows from y_max
             direct = np.float32(s.exposure * self._attenuation / (1.0 + s.diffuse_fraction))
-            self._window_light = np.flipud(lit)[:, :, None] * direct
-            self._window_light += self._uniform - direct
+            window = np.flipud(lit) * direct
+            window += self._uniform - direct
+            # three channels: the texture's multiply then runs along whole rows
+            self._window_light = np.repeat(window[:, :, None], 3, axis=2)
             self._window_box = (rows.start, rows.stop, cols.start, cols.stop)
         if not force:
             self.renders['light'] += 1
@@ -416,25 +433,35 @@ class RgbCamera:
         self._dirty.append(tuple(box))
 
     # ------------------------------------------------------------------ the frame
-    def _optics(self, light, rect=None):
-        """Blur and vignette `light` (the image's part `rect`, or all) in place; return it."""
-        s = self._webcam.settings
-        if s.blur_sigma > 0.0:
-            cv2.GaussianBlur(light, (0, 0), s.blur_sigma, dst=light)
-        vignette = self._webcam._vignette
-        if vignette is not None:
-            x0, y0, x1, y1 = rect or (0, 0, self.camera.width, self.camera.height)
-            np.multiply(light, vignette[y0:y1, x0:x1], out=light)
+    def _blur(self, light):
+        """Blur `light` (linear, on the sensor) in place by the optics; return it."""
+        sigma = self._webcam.settings.blur_sigma
+        if sigma > 0.0:
+            cv2.GaussianBlur(light, (0, 0), sigma, dst=light)
         return light
 
+    def _sensor_stage(self, light, rect):
+        """
+        Return the prepared sensor stage of blurred `light`, the image's part `rect`.
+
+        The vignetting (the optics' last step) goes with the linearised read-out's table
+        index; the exact read-out gets the light vignetted (as ``Webcam.optics`` does).
+        """
+        x0, y0, x1, y1 = rect
+        if self._read_out is not None:
+            scale = None if self._index_scale is None else self._index_scale[y0:y1, x0:x1]
+            return self._read_out.prepare(light, scale)
+        vignette = self._webcam._vignette
+        if vignette is not None:
+            light = light * vignette[y0:y1, x0:x1]
+        return self._webcam.prepare(light)
+
     def _redo(self, T_world_camera, wide, inner):
-        """Redo the frame's light and its sensor stage in `inner` (rendered over `wide`)."""
-        part = self._optics(self._radiance(T_world_camera, self._lit, rect=wide), wide)
+        """Redo the frame's sensor stage in `inner` (its light rendered over `wide`)."""
+        part = self._blur(self._radiance(T_world_camera, self._lit, rect=wide))
         x0, y0, x1, y1 = inner
-        self._frame[y0:y1, x0:x1] = part[y0 - wide[1]:y1 - wide[1], x0 - wide[0]:x1 - wide[0]]
-        prepare = (self._webcam.prepare if self._read_out is None
-                   else self._read_out.prepare)
-        first, second = prepare(self._frame[y0:y1, x0:x1])
+        first, second = self._sensor_stage(
+            part[y0 - wide[1]:y1 - wide[1], x0 - wide[0]:x1 - wide[0]], inner)
         self._prepared[0][y0:y1, x0:x1] = first
         if second is not None:
             self._prepared[1][y0:y1, x0:x1] = second
