@@ -310,6 +310,11 @@ class NodeRun:
     def measure(self, wall_seconds, between=None):
         """Return (simulated, wall, node cpu, frames) over `wall_seconds`, calling `between`."""
         self.spin(0.3)
+        deadline = time.monotonic() + 30.0
+        while self.sim_time == 0.0:     # from the first /clock on, not from time 0
+            if time.monotonic() > deadline:
+                raise RuntimeError('no /clock from the sim_world node')
+            self.executor.spin_once(timeout_sec=0.05)
         sim0, cpu0, wall0 = self.sim_time, _process_cpu_seconds(self.process.pid), \
             time.monotonic()
         counts0 = dict(self.counts)
