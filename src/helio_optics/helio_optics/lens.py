@@ -35,6 +35,10 @@ transmission (0 for TIR), ``hit`` (N,) bool, ``tir_count``, ``incident_power`` [
 (Eq 13: q_s A_l cos(beta)), ``ring`` (N,) ring index of each ray and ``directions``
 (N, 3) of the leaving rays in ``frame``.
 
+``trace_bands(lens, samples, refractive_indices, sun_direction, ...)``: the same samples
+at B indices (spectral bands, the facets cut for the design index) in one pass; results
+with a leading band axis, element for element what B calls of ``trace`` give.
+
 ``paraxial_focus_distance(lens)``: thick-lens back focus measured from the lens centre
 O_l, f + t (1 - 1/n).
 """
