@@ -3,8 +3,9 @@ Solar flux on the panel through the lens (issue 6, item 2; paper Eqs 1-6, 13, 16
 
 The rays are traced by ``helio_optics.lens.trace_bands`` (the one ray tracer's arithmetic,
 every spectral band in one pass) from the lens pose the emulated devices reached
-(``helio_optics.rig_kinematics``) onto the panel plane z = 0 of the world frame. Sunlight is not one colour: acrylic's index falls from 1.502 at 437 nm to
-about 1.482 at 1.5 um, so the focus spreads along the axis by a few millimetres (DESIGN.md).
+(``helio_optics.rig_kinematics``) onto the panel plane z = 0 of the world frame. Sunlight
+is not one colour: acrylic's index falls from 1.502 at 437 nm to about 1.482 at 1.5 um, so
+the focus spreads along the axis by a few millimetres (DESIGN.md).
 The world's lens is traced in spectral bands (Cauchy fit n(l) = A + B / l^2 of PMMA, band
 weights of the direct solar spectrum), every band through the same facets (cut for the
 design index), each carrying its share of the power. Rays are sampled uniformly over the
