@@ -1,11 +1,12 @@
 """Flux on the panel: power conservation, shadow, re-tracing only when something moved."""
 
+from dataclasses import replace
 import math
 
 from helio_drivers.sim.flux import (bin_on_edges, irradiance_on_cells, LensFlux,
                                     shadow_fractions)
 from helio_optics.geometry import homogeneous, rotation_y, unit
-from helio_optics.lens import LensParameters, pmma_index
+from helio_optics.lens import LensParameters, pmma_index, trace
 import numpy as np
 import pytest
 
@@ -151,3 +152,23 @@ def test_shadow_fractions_sampled_along_the_edge_equal_sampling_every_cell(tilt)
     every_cell = field.in_shadow(xs[None, :, None, :], ys[:, None, :, None]).mean(axis=(2, 3))
     fast = shadow_fractions(field, x_edges, y_edges, 3)
     assert 0.0 < every_cell.mean() < 1.0 and np.array_equal(fast, every_cell)
+
+
+@pytest.mark.parametrize('moving', [False, True])
+def test_all_bands_traced_at_once_equal_a_trace_per_band(moving):
+    lens = LensParameters(focal_length=0.081, aperture_diameter=0.038)
+    flux = LensFlux(lens, rays=4000, beam_spread=0.004, moving_rays=500)
+    s0 = unit([0.2, 0.1, -1.0])
+    T = homogeneous(rotation_y(0.1), [0.001, 0.0, 0.08])
+    field = flux.field(T, s0, moving=moving)
+    samples = flux._moving_samples if moving else flux._samples
+    points, powers = [], []
+    for index, weight in zip(flux._indices, flux._weights):
+        band_lens = replace(lens, refractive_index=index,
+                            focal_length=lens.sphere_radius / (index - 1.0))
+        result = trace(band_lens, replace(samples, lens=band_lens), s0, T, irradiance=1.0)
+        points.append(result.points[result.hit, :2])
+        powers.append(weight * result.power[result.hit])
+    assert np.allclose(field.points, np.concatenate(points), rtol=0.0, atol=1e-15)
+    assert np.allclose(field.power, np.concatenate(powers), rtol=1e-15, atol=0.0)
+    assert len(field.power) > 0.9 * len(samples) * len(flux._indices)

@@ -5,7 +5,7 @@ import math
 from helio_optics.geometry import homogeneous, rotation_x, rotation_y, transform_points
 from helio_optics.lens import area_samples, facet_sin_polar, LensParameters, LensSamples
 from helio_optics.lens import outer_ring_samples, paraxial_focus_distance, ring_samples
-from helio_optics.lens import trace, trace_batch
+from helio_optics.lens import trace, trace_bands, trace_batch
 import numpy as np
 import pytest
 
@@ -158,3 +158,28 @@ def test_batch_trace_equals_one_pose_at_a_time():
                                    atol=1e-14)
     with pytest.raises(ValueError, match='radius_fraction'):
         outer_ring_samples(lens, radius_fraction=1.5)
+
+
+def test_band_trace_equals_one_index_at_a_time():
+    lens = LensParameters(focal_length=0.081, aperture_diameter=0.038, thickness=0.002)
+    samples = area_samples(lens, 3000, seed=5)
+    indices = [1.47, 1.4914, 1.52]
+    T = homogeneous(rotation_x(0.3) @ rotation_y(-0.2), [0.01, -0.02, 0.08])
+    s0 = [0.3, -0.1, -1.0]
+    together = trace_bands(lens, samples, indices, s0, T, irradiance=800.0)
+    for band, index in enumerate(indices):
+        band_lens = LensParameters(focal_length=lens.sphere_radius / (index - 1.0),
+                                   refractive_index=index, thickness=lens.thickness,
+                                   aperture_diameter=lens.aperture_diameter)
+        alone = trace(band_lens, LensSamples(
+            lens=band_lens, facet_sin=samples.facet_sin, radius=samples.radius,
+            azimuth=samples.azimuth, weight=samples.weight, disk_u=samples.disk_u,
+            disk_v=samples.disk_v, ring=samples.ring), s0, T, irradiance=800.0)
+        assert np.array_equal(together.hit[band], alone.hit)
+        assert np.allclose(together.points[band][alone.hit], alone.points[alone.hit],
+                           rtol=0.0, atol=1e-15)
+        assert np.array_equal(together.power[band], alone.power)
+        assert together.tir_count[band] == alone.tir_count
+        assert together.incident_power == alone.incident_power
+    behind = trace_bands(lens, samples, indices, [0.0, 0.0, 1.0], T)
+    assert behind.points.shape == (3, 3000, 3) and not behind.hit.any()

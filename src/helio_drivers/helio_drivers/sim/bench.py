@@ -51,6 +51,7 @@ from helio_drivers.sim.flux import irradiance_on_cells, lens_pose_in_world
 from helio_drivers.sim.truth import true_sun_focus_joints
 from helio_drivers.sim.world import SimSettings, SimWorld
 from helio_optics.bench_report import add_json_option, median_call_ms, report
+from helio_optics.node_kit.process_tuning import single_threaded_numerics
 from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
 from helio_optics.rig_kinematics import RigParameters
 import numpy as np
@@ -309,6 +310,11 @@ class NodeRun:
     def measure(self, wall_seconds, between=None):
         """Return (simulated, wall, node cpu, frames) over `wall_seconds`, calling `between`."""
         self.spin(0.3)
+        deadline = time.monotonic() + 30.0
+        while self.sim_time == 0.0:     # from the first /clock on, not from time 0
+            if time.monotonic() > deadline:
+                raise RuntimeError('no /clock from the sim_world node')
+            self.executor.spin_once(timeout_sec=0.05)
         sim0, cpu0, wall0 = self.sim_time, _process_cpu_seconds(self.process.pid), \
             time.monotonic()
         counts0 = dict(self.counts)
@@ -453,6 +459,7 @@ def main(argv=None):
     parser.add_argument('--quick', action='store_true',
                         help='short runs (2 s heating, 1 dot, 2 s node): for tests')
     args = parser.parse_args(argv)
+    single_threaded_numerics()   # as every helio process (the node's run_node does it too)
     if args.quick:
         args.seconds, args.dots, args.node_seconds = 2.0, 1, 2.0
     figures = bench_sim(args.seconds, args.dots, args.skip_node, args.node_seconds,

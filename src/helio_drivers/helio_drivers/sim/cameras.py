@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import math
 
 import cv2
-from helio_optics.geometry import invert_transform, PinholeCamera, transform_points
+from helio_optics.geometry import PinholeCamera
 from helio_optics.ground_render import (decode_srgb8, GroundRenderer, GroundTexture,
                                         jpeg_round_trip, linear_to_srgb,
                                         make_panel_texture, WebcamSettings)
@@ -218,11 +218,24 @@ class NoisyReadOut:
             (self.FRAMES, self._size + self._slack), dtype=np.float32)
         self._bank = np.clip(np.rint(draw * np.float32(self.NOISE_SCALE)),
                              -127, 127).astype(np.int8)
+        self._product = None
 
-    def prepare(self, light):
-        """Return (level, gain) float32 for linear `light` on the sensor (after the optics)."""
+    def index_scale(self):
+        """Return the table steps per unit of linear light (for `prepare`'s `scale`)."""
+        return self.top * self.SUBCODES
+
+    def prepare(self, light, scale=None):
+        """
+        Return (level, gain) float32 for linear `light` on the sensor (after the optics).
+
+        `scale`: table steps per unit of light per pixel (`index_scale` x a gain the light
+        still needs, such as the vignetting: one pass for both), or None.
+        """
         light = np.asarray(light, dtype=np.float32)
-        index = light * np.float32(self.top * self.SUBCODES)
+        if scale is None:
+            index = light * np.float32(self.index_scale())
+        else:
+            index = np.multiply(light, scale, dtype=np.float32)
         np.clip(index, 0.0, float(self._last), out=index)
         index += np.float32(0.5)
         index = index.astype(np.intp)
@@ -234,7 +247,10 @@ class NoisyReadOut:
         rng = np.random.default_rng() if rng is None else rng
         k, offset = (int(v) for v in rng.integers(0, (self.FRAMES, self._slack + 1)))
         noise = self._bank[k, offset:offset + self._size].reshape(level.shape)
-        image = cv2.add(level, cv2.multiply(noise, gain, dtype=cv2.CV_32F), dtype=cv2.CV_8U)
+        if self._product is None or self._product.shape != level.shape:
+            self._product = np.empty(level.shape, np.float32)   # reused frame after frame
+        cv2.multiply(noise, gain, dst=self._product, dtype=cv2.CV_32F)
+        image = cv2.add(level, self._product, dtype=cv2.CV_8U)
         quality = self._webcam.settings.jpeg_quality
         return jpeg_round_trip(image, quality) if quality > 0 else image
 
@@ -261,17 +277,27 @@ class RgbCamera:
         self._wood = decode_srgb8(texture.image)          # linear; rows from y_max (top view)
         self._albedo = GroundTexture(image=self._wood.copy(), extent=self.extent, linear=True)
         self._char_rgb = decode_srgb8(np.array([CHAR_RGB], np.uint8))[0]
-        self._panel = None          # optics(light of the albedo) at `_panel_pose`
-        self._panel_pose = None
-        self._dirty = []            # albedo raster boxes changed since `_panel` was made
+        # the panel's light on the sensor before the optics: albedo x irradiance x exposure
+        # (rows from y_max), kept up to date with the char, the window and the clouds
+        self._lit = GroundTexture(image=np.empty_like(self._wood), extent=self.extent,
+                                  linear=True)
+        self._uniform = None        # exposure x daylight outside the window, in `_lit`
+        self._attenuation = None    # the direct sun's share it was made for
         self._light_source = None   # the light window of the last frame
-        self._attenuation = None    # and its direct sun's share
-        self._window_rect = None    # image rectangle of the window's change to the light
-        self._window_term = None    # and that change
-        self._window_texture = None  # the window's change on the panel (albedo x change)
-        self._frame = None          # the last frame's light on the sensor
-        self._prepared = None       # and its noise-free sensor stage
-        self.renders = {'frames': 0, 'panel': 0, 'panel_parts': 0, 'light': 0}
+        self._window_box = None     # its raster box (r0, r1, c0, c1) and its light per unit
+        self._window_light = None   # albedo (exposure x irradiance, (h, w, 3), rows from y_max)
+        self._dirty = []            # raster boxes of `_lit` changed since `_prepared` was made
+        self._prepared = None       # the noise-free sensor stage of the frame at `_pose`
+        self._pose = None
+        self._view = None           # per-pose geometry (`_pose_view`)
+        self._view_key = None
+        # the linearised read-out takes the vignetting with its table index (one pass)
+        vignette = self._webcam._vignette
+        self._index_scale = None
+        if self._read_out is not None and vignette is not None:
+            self._index_scale = np.ascontiguousarray(np.broadcast_to(
+                vignette * np.float32(self._read_out.index_scale()), (s.height, s.width, 3)))
+        self.renders = {'frames': 0, 'whole': 0, 'parts': 0, 'light': 0}
 
     def update_char(self, char, box=None):
         """
@@ -288,7 +314,8 @@ class RgbCamera:
         top = slice(height - r1, height - r0)
         self._albedo.image[top, c0:c1] = (self._wood[top, c0:c1] * (1.0 - chi)
                                           + self._char_rgb * chi)
-        self._dirty.append((r0, r1, c0, c1))
+        if self._uniform is not None:
+            self._relight(box)
 
     def top_view(self, char):
         """
@@ -311,26 +338,34 @@ class RgbCamera:
         value under clouds), except in `light` = (rows, cols, lit) from ``light_window``:
         the direct sun there, relative to the clear direct sun on the panel (0 in the lens
         shadow, far above 1 in the focus).
+
+        Kept between frames: the panel's lit texture (albedo x irradiance x exposure),
+        changed only where the char, the window or the clouds changed it, and the frame's
+        light through the optics with its noise-free sensor stage at the present pose,
+        redone over the image region of the texture's changes (all of it after a move or
+        a cloud): an unchanged scene costs the noise and the read-out.
         """
         self.renders['frames'] += 1
         pose = np.asarray(T_world_camera, dtype=np.float64).tobytes()
         attenuation = float(attenuation)
-        whole = (pose != self._panel_pose or self._panel is None or self._frame is None
-                 or attenuation != self._attenuation)
-        parts = self._panel_light(T_world_camera, pose)
-        changed = [rect for _, rect in parts]
-        if light is not self._light_source or whole:
-            changed.append(self._window_rect)   # where the old window was
-            self._window(T_world_camera, light, attenuation)
-            changed.append(self._window_rect)
-        else:
-            self._window_update(T_world_camera, [box for box, _ in parts])
-        self._light_source, self._attenuation = light, attenuation
+        whole = pose != self._pose or self._prepared is None
+        if attenuation != self._attenuation:
+            self._set_daylight(attenuation)
+            whole = True
+        if light is not self._light_source:
+            self._set_window(light)
         if whole:
-            self._compose((0, 0, self.camera.width, self.camera.height), prepare_all=True)
+            self.renders['whole'] += 1
+            self._prepared = self._sensor_stage(self._blur(self._radiance(
+                T_world_camera, self._lit)), (0, 0, self.camera.width, self.camera.height))
+            self._pose = pose
         else:
-            for rect in _merged([rect for rect in changed if rect is not None]):
-                self._compose(rect)
+            for box in _merged_boxes(self._dirty):
+                rect = self._image_rect(T_world_camera, self._raster_box_world(*box))
+                if rect is not None:
+                    self.renders['parts'] += 1
+                    self._redo(T_world_camera, *rect)
+        self._dirty = []
         if self._read_out is not None:
             return self._read_out.expose(self._prepared, rng)
         return self._webcam.expose(self._prepared, rng)
@@ -349,112 +384,84 @@ class RgbCamera:
         irradiance = (s.diffuse_fraction + attenuation * lit) / (1.0 + s.diffuse_fraction)
         return rows, cols, s.exposure * albedo * irradiance[:, :, None]
 
-    def _panel_light(self, T_world_camera, pose):
-        """
-        Keep the panel's light through the optics at a pose (albedo x 1) up to date.
-
-        Return the (raster box, image rectangle) of each part redone (none after a move:
-        the caller redoes all).
-        """
-        changed = []
-        if pose != self._panel_pose or self._panel is None:
-            self.renders['panel'] += 1
-            self._panel = self._webcam.optics(self._radiance(
-                T_world_camera, self._albedo))
-            self._panel_pose, self._dirty = pose, []
-        for r0, r1, c0, c1 in self._dirty:
-            rect = self._image_rect(T_world_camera, self._raster_box_world(r0, r1, c0, c1))
-            if rect is None:
-                continue
-            self.renders['panel_parts'] += 1
-            wide, inner = rect
-            part = self._webcam.optics(self._radiance(
-                T_world_camera, self._albedo, rect=wide), wide)
-            x0, y0, x1, y1 = inner
-            self._panel[y0:y1, x0:x1] = part[y0 - wide[1]:y1 - wide[1],
-                                             x0 - wide[0]:x1 - wide[0]]
-            changed.append(((r0, r1, c0, c1), inner))
-        self._dirty = []
-        return changed
-
-    def _window(self, T_world_camera, light, attenuation):
-        """Render the lens shadow and the focus's change to the light, over their region."""
-        self._window_rect = self._window_term = self._window_texture = None
-        if light is None or attenuation <= 0.0:
-            return
-        self.renders['light'] += 1
-        rows, cols, lit = light
-        box = self._raster_box_world(rows.start, rows.stop, cols.start, cols.stop)
-        rect = self._image_rect(T_world_camera, box)
-        if rect is None:
-            return
+    # ------------------------------------------------------------------ the lit texture
+    def _set_daylight(self, attenuation):
+        """Light the whole texture for a new direct-sun share (sky + attenuation x sun)."""
         s = self.settings
-        self._window_change = np.flipud(lit)[:, :, None] - np.float32(1.0)   # rows from y_max
-        self._window_change *= np.float32(s.exposure * attenuation / (1.0 + s.diffuse_fraction))
-        self._window_rows, self._window_cols = rows, cols
-        height = self._albedo.image.shape[0]
-        patch = self._albedo.image[height - rows.stop:height - rows.start, cols]
-        self._window_texture = GroundTexture(image=patch * self._window_change, extent=box,
-                                             linear=True)
-        wide, inner = rect
-        term = self._webcam.optics(self._radiance(
-            T_world_camera, self._window_texture, rect=wide), wide)
-        x0, y0, x1, y1 = inner
-        self._window_rect = inner
-        self._window_term = term[y0 - wide[1]:y1 - wide[1], x0 - wide[0]:x1 - wide[0]].copy()
+        self._attenuation = attenuation
+        self._uniform = np.float32(s.exposure * (s.diffuse_fraction + attenuation)
+                                   / (1.0 + s.diffuse_fraction))
+        np.multiply(self._albedo.image, self._uniform, out=self._lit.image)
+        if self._light_source is not None:
+            self._set_window(self._light_source, force=True)
 
-    def _window_update(self, T_world_camera, boxes):
-        """Redo the window's change where char changed the albedo (raster `boxes`)."""
-        if self._window_texture is None:
-            return
-        rows, cols = self._window_rows, self._window_cols
-        height = self._albedo.image.shape[0]
-        for r0, r1, c0, c1 in boxes:
-            r0, r1 = max(r0, rows.start), min(r1, rows.stop)
-            c0, c1 = max(c0, cols.start), min(c1, cols.stop)
-            if r1 <= r0 or c1 <= c0:
-                continue
-            # texture rows run from y_max: raster rows r0..r1 are these
-            top, window_top = slice(height - r1, height - r0), slice(rows.stop - r1,
-                                                                     rows.stop - r0)
-            part = slice(c0 - cols.start, c1 - cols.start)
-            self._window_texture.image[window_top, part] = \
-                self._albedo.image[top, c0:c1] * self._window_change[window_top, part]
-            rect = self._image_rect(T_world_camera, self._raster_box_world(r0, r1, c0, c1))
-            inner = None if rect is None else _intersection(rect[1], self._window_rect)
-            if inner is None:
-                continue
-            wide = rect[0]
-            term = self._webcam.optics(self._radiance(
-                T_world_camera, self._window_texture, rect=wide), wide)
-            x0, y0, x1, y1 = inner
-            wx, wy = self._window_rect[:2]
-            self._window_term[y0 - wy:y1 - wy, x0 - wx:x1 - wx] = \
-                term[y0 - wide[1]:y1 - wide[1], x0 - wide[0]:x1 - wide[0]]
-
-    def _compose(self, rect, prepare_all=False):
-        """Redo the frame's light and its prepared sensor stage inside `rect` (x0, y0, x1, y1)."""
+    def _set_window(self, light, force=False):
+        """Put the lens shadow and the focus of `light` into the texture (the old one out)."""
         s = self.settings
-        uniform = (s.diffuse_fraction + self._attenuation) / (1.0 + s.diffuse_fraction)
-        if prepare_all:
-            self._frame = self._panel * np.float32(s.exposure * uniform)
-        else:
-            x0, y0, x1, y1 = rect
-            self._frame[y0:y1, x0:x1] = self._panel[y0:y1, x0:x1] * np.float32(
-                s.exposure * uniform)
-        if self._window_rect is not None:
-            both = _intersection(rect, self._window_rect)
-            if both is not None:
-                wx, wy = self._window_rect[:2]
-                x0, y0, x1, y1 = both
-                self._frame[y0:y1, x0:x1] += self._window_term[y0 - wy:y1 - wy, x0 - wx:x1 - wx]
-        prepare = (self._webcam.prepare if self._read_out is None
-                   else self._read_out.prepare)
-        if prepare_all:
-            self._prepared = prepare(self._frame)
-            return
+        old = self._window_box
+        self._light_source = light
+        self._window_box = self._window_light = None
+        if light is not None and self._attenuation > 0.0:
+            rows, cols, lit = light
+            # exposure x (sky + attenuation x lit) / (1 + sky), rows from y_max
+            direct = np.float32(s.exposure * self._attenuation / (1.0 + s.diffuse_fraction))
+            window = np.flipud(lit) * direct
+            window += self._uniform - direct
+            # three channels: the texture's multiply then runs along whole rows
+            self._window_light = np.repeat(window[:, :, None], 3, axis=2)
+            self._window_box = (rows.start, rows.stop, cols.start, cols.stop)
+        if not force:
+            self.renders['light'] += 1
+        boxes = [box for box in (None if force else old, self._window_box) if box is not None]
+        for box in _merged_boxes(boxes):
+            self._relight(box)
+
+    def _relight(self, box):
+        """Redo the lit texture in raster `box` (r0, r1, c0, c1) and mark it changed."""
+        height = self._albedo.image.shape[0]
+        albedo, lit = self._albedo.image, self._lit.image
+        inside = _box_intersection(box, self._window_box)
+        for r0, r1, c0, c1 in _box_minus(box, inside):   # daylight alone
+            top = slice(height - r1, height - r0)
+            np.multiply(albedo[top, c0:c1], self._uniform, out=lit[top, c0:c1])
+        if inside is not None:
+            r0, r1, c0, c1 = inside
+            w0, w1, v0, v1 = self._window_box
+            top = slice(height - r1, height - r0)
+            np.multiply(albedo[top, c0:c1], self._window_light[w1 - r1:w1 - r0, c0 - v0:c1 - v0],
+                        out=lit[top, c0:c1])
+        self._dirty.append(tuple(box))
+
+    # ------------------------------------------------------------------ the frame
+    def _blur(self, light):
+        """Blur `light` (linear, on the sensor) in place by the optics; return it."""
+        sigma = self._webcam.settings.blur_sigma
+        if sigma > 0.0:
+            cv2.GaussianBlur(light, (0, 0), sigma, dst=light)
+        return light
+
+    def _sensor_stage(self, light, rect):
+        """
+        Return the prepared sensor stage of blurred `light`, the image's part `rect`.
+
+        The vignetting (the optics' last step) goes with the linearised read-out's table
+        index; the exact read-out gets the light vignetted (as ``Webcam.optics`` does).
+        """
         x0, y0, x1, y1 = rect
-        first, second = prepare(self._frame[y0:y1, x0:x1])
+        if self._read_out is not None:
+            scale = None if self._index_scale is None else self._index_scale[y0:y1, x0:x1]
+            return self._read_out.prepare(light, scale)
+        vignette = self._webcam._vignette
+        if vignette is not None:
+            light = light * vignette[y0:y1, x0:x1]
+        return self._webcam.prepare(light)
+
+    def _redo(self, T_world_camera, wide, inner):
+        """Redo the frame's sensor stage in `inner` (its light rendered over `wide`)."""
+        part = self._blur(self._radiance(T_world_camera, self._lit, rect=wide))
+        x0, y0, x1, y1 = inner
+        first, second = self._sensor_stage(
+            part[y0 - wide[1]:y1 - wide[1], x0 - wide[0]:x1 - wide[0]], inner)
         self._prepared[0][y0:y1, x0:x1] = first
         if second is not None:
             self._prepared[1][y0:y1, x0:x1] = second
@@ -471,8 +478,8 @@ class RgbCamera:
         """
         mapping = self._texture_homography(T_world_camera, texture)
         if mapping is None:
-            return self._renderer.radiance(T_world_camera, texture, background=0.0,
-                                           rect=rect)
+            return np.ascontiguousarray(self._renderer.radiance(
+                T_world_camera, texture, background=0.0, rect=rect), dtype=np.float32)
         homography, downward = mapping
         x0, y0, x1, y1 = rect or (0, 0, self.camera.width, self.camera.height)
         if x0 or y0:
@@ -488,6 +495,41 @@ class RgbCamera:
             _blank_above_horizon(light, downward, x0, y0)
         return light
 
+    def _pose_view(self, T_world_camera):
+        """
+        Return the geometry of a camera pose, worked out once per pose (a dict).
+
+        'ground': the 3 x 3 map from image pixels to homogeneous ground points (None when
+        the camera distorts, supersamples or sees no ground), 'horizon': (a, b, c) with
+        a u + b v + c >= 0 on the pixels at or above the horizon (None: there are none),
+        'project': the 3 x 4 map from world points to homogeneous pixels whose third
+        component is the depth (None when the camera distorts).
+        """
+        key = np.asarray(T_world_camera, dtype=np.float64).tobytes()
+        if key == self._view_key:
+            return self._view
+        pose = np.asarray(T_world_camera, dtype=float)
+        matrix = np.asarray(self.camera.matrix, dtype=float)
+        distorted = bool(np.any(self.camera.distortion))
+        view = {'ground': None, 'horizon': None, 'project': None}
+        if not distorted:
+            rotation = pose[:3, :3].T
+            view['project'] = matrix @ np.hstack([rotation, -(rotation @ pose[:3, 3:4])])
+        rays = pose[:3, :3] @ np.linalg.inv(matrix)
+        width, height = self.camera.width, self.camera.height
+        corners = np.array([[-0.5, -0.5, 1.0], [width - 0.5, -0.5, 1.0],
+                            [-0.5, height - 0.5, 1.0], [width - 0.5, height - 0.5, 1.0]])
+        downward = corners @ rays[2]              # d_z, affine in (u, v): its corners
+        if (self._renderer.supersample == 1 and not distorted and np.any(downward < 0.0)
+                and pose[2, 3] > 0.0):
+            ox, oy, oz = pose[:3, 3]
+            view['ground'] = np.stack([ox * rays[2] - oz * rays[0],
+                                       oy * rays[2] - oz * rays[1], rays[2]])
+            if not np.all(downward < 0.0):
+                view['horizon'] = tuple(float(v) for v in rays[2])
+        self._view, self._view_key = view, key
+        return view
+
     def _texture_homography(self, T_world_camera, texture):
         """
         Return the 3 x 3 map from image pixels (centres at integers) to texture pixels.
@@ -499,25 +541,15 @@ class RgbCamera:
         the homogeneous (o_x d_z - o_z d_x, o_y d_z - o_z d_y, d_z): linear in (u, v, 1);
         the texture's pixel grid is affine in the ground point.
         """
-        if self._renderer.supersample != 1 or np.any(self.camera.distortion):
+        view = self._pose_view(T_world_camera)
+        if view['ground'] is None:
             return None
-        pose = np.asarray(T_world_camera, dtype=float)
-        rays = pose[:3, :3] @ np.linalg.inv(np.asarray(self.camera.matrix, dtype=float))
-        width, height = self.camera.width, self.camera.height
-        corners = np.array([[-0.5, -0.5, 1.0], [width - 0.5, -0.5, 1.0],
-                            [-0.5, height - 0.5, 1.0], [width - 0.5, height - 0.5, 1.0]])
-        downward = corners @ rays[2]              # d_z, affine in (u, v): its corners
-        if not np.any(downward < 0.0) or pose[2, 3] <= 0.0:
-            return None
-        ox, oy, oz = pose[:3, 3]
-        ground = np.stack([ox * rays[2] - oz * rays[0], oy * rays[2] - oz * rays[1], rays[2]])
         x_min, _, _, y_max = texture.extent
         sx, sy = texture.metres_per_pixel
         to_texture = np.array([[1.0 / sx, 0.0, -x_min / sx - 0.5],
                                [0.0, -1.0 / sy, y_max / sy - 0.5],
                                [0.0, 0.0, 1.0]])
-        horizon = None if np.all(downward < 0.0) else tuple(float(v) for v in rays[2])
-        return to_texture @ ground, horizon
+        return to_texture @ view['ground'], view['horizon']
 
     def _raster_box_world(self, r0, r1, c0, c1):
         """Return the world extent (x_min, x_max, y_min, y_max) of raster rows/cols [m]."""
@@ -529,25 +561,28 @@ class RgbCamera:
         """
         Return (wide, inner) image rectangles (x0, y0, x1, y1) [px] of a ground box, or None.
 
-        `inner` holds every pixel that sees the box or its blur; `wide` adds the context the
-        blur needs. The whole image when a corner of the box is behind the camera.
+        `inner` holds every pixel that sees the box or its blur (its corner on even pixels:
+        the Bayer mosaic's phase); `wide` adds the context the blur needs. The whole image
+        when a corner of the box is behind the camera or the camera distorts.
         """
         x0, x1, y0, y1 = box
-        corners = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
-        in_camera = transform_points(invert_transform(T_world_camera), corners)
         width, height = self.camera.width, self.camera.height
-        if np.any(in_camera[:, 2] <= 0.0) or np.any(self.camera.distortion):
-            pixels = None
-        else:
-            pixels = self.camera.project(in_camera)
+        project = self._pose_view(T_world_camera)['project']
+        pixels = None
+        if project is not None:
+            corners = np.array([[x0, y0, 0.0, 1.0], [x1, y0, 0.0, 1.0],
+                                [x1, y1, 0.0, 1.0], [x0, y1, 0.0, 1.0]])
+            homogeneous = corners @ project.T
+            if np.all(homogeneous[:, 2] > 0.0):
+                pixels = homogeneous[:, :2] / homogeneous[:, 2:]
         margin = self._webcam.blur_margin() + 2
         if pixels is None:
             inner = (0, 0, width, height)
         else:
             low = np.floor(pixels.min(axis=0)).astype(int) - margin
             high = np.ceil(pixels.max(axis=0)).astype(int) + margin + 1
-            inner = (max(int(low[0]), 0), max(int(low[1]), 0), min(int(high[0]), width),
-                     min(int(high[1]), height))
+            inner = (max(int(low[0]) // 2 * 2, 0), max(int(low[1]) // 2 * 2, 0),
+                     min(int(high[0]), width), min(int(high[1]), height))
             if inner[2] <= inner[0] or inner[3] <= inner[1]:
                 return None
         wide = (max(inner[0] - margin, 0), max(inner[1] - margin, 0),
@@ -573,25 +608,51 @@ def _blank_above_horizon(light, downward, x0, y0):
         light[row][a * columns + b * rows[row] + c >= 0.0] = 0.0
 
 
-def _intersection(a, b):
-    """Return the intersection of two rectangles (x0, y0, x1, y1), or None."""
+def _merged_boxes(boxes):
+    """
+    Return raster boxes (r0, r1, c0, c1) covering `boxes`, overlapping ones merged.
+
+    Boxes are merged while their bounding box is not much larger than the two (a char
+    change inside the light window, the old and the new window): one render each.
+    """
+    merged = []
+    for box in boxes:
+        box = tuple(box)
+        joined = True
+        while joined:
+            joined = False
+            for k, other in enumerate(merged):
+                bound = (min(box[0], other[0]), max(box[1], other[1]),
+                         min(box[2], other[2]), max(box[3], other[3]))
+                if _area(bound) <= 1.5 * (_area(box) + _area(other)):
+                    box, joined = bound, True
+                    del merged[k]
+                    break
+        merged.append(box)
+    return merged
+
+
+def _box_intersection(a, b):
+    """Return the intersection of raster boxes (r0, r1, c0, c1), or None."""
     if a is None or b is None:
         return None
-    x0, y0, x1, y1 = max(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), min(a[3], b[3])
-    return (x0, y0, x1, y1) if x1 > x0 and y1 > y0 else None
+    box = (max(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), min(a[3], b[3]))
+    return box if box[1] > box[0] and box[3] > box[2] else None
 
 
-def _overlap(a, b):
-    """Tell whether two rectangles overlap."""
-    return _intersection(a, b) is not None
+def _box_minus(box, hole):
+    """Return up to four raster boxes covering `box` without `hole` (inside it, or None)."""
+    if hole is None:
+        return [box]
+    r0, r1, c0, c1 = box
+    h0, h1, g0, g1 = hole
+    parts = [(r0, h0, c0, c1), (h1, r1, c0, c1), (h0, h1, c0, g0), (h0, h1, g1, c1)]
+    return [part for part in parts if part[1] > part[0] and part[3] > part[2]]
 
 
-def _merged(rects):
-    """Return one even-aligned rectangle covering all of `rects` (the Bayer phase), or none."""
-    if not rects:
-        return []
-    x0, y0 = min(r[0] for r in rects) // 2 * 2, min(r[1] for r in rects) // 2 * 2
-    return [(x0, y0, max(r[2] for r in rects), max(r[3] for r in rects))]
+def _area(box):
+    """Return the pixels of a raster box (r0, r1, c0, c1)."""
+    return max(box[1] - box[0], 0) * max(box[3] - box[2], 0)
 
 
 def light_window(field, shape, origin, pixel_size, window):

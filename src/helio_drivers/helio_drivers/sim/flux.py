@@ -1,10 +1,11 @@
 """
 Solar flux on the panel through the lens (issue 6, item 2; paper Eqs 1-6, 13, 16).
 
-The rays are traced by ``helio_optics.lens.trace`` (the one ray tracer) from the lens pose
-the emulated devices reached (``helio_optics.rig_kinematics``) onto the panel plane z = 0 of
-the world frame. Sunlight is not one colour: acrylic's index falls from 1.502 at 437 nm to
-about 1.482 at 1.5 um, so the focus spreads along the axis by a few millimetres (DESIGN.md).
+The rays are traced by ``helio_optics.lens.trace_bands`` (the one ray tracer's arithmetic,
+every spectral band in one pass) from the lens pose the emulated devices reached
+(``helio_optics.rig_kinematics``) onto the panel plane z = 0 of the world frame. Sunlight
+is not one colour: acrylic's index falls from 1.502 at 437 nm to about 1.482 at 1.5 um, so
+the focus spreads along the axis by a few millimetres (DESIGN.md).
 The world's lens is traced in spectral bands (Cauchy fit n(l) = A + B / l^2 of PMMA, band
 weights of the direct solar spectrum), every band through the same facets (cut for the
 design index), each carrying its share of the power. Rays are sampled uniformly over the
@@ -20,7 +21,8 @@ from dataclasses import dataclass, replace
 import math
 
 from helio_optics.geometry import invert_transform
-from helio_optics.lens import area_samples, LensParameters, pmma_index, SOLAR_BANDS, trace
+from helio_optics.lens import (area_samples, LensParameters, pmma_index, SOLAR_BANDS,
+                               trace_bands)
 import numpy as np
 
 # The world's lens is acrylic in sunlight: the optics core's PMMA index (Cauchy fit) and the
@@ -115,18 +117,14 @@ class LensFlux:
             errors = np.random.default_rng(seed + 1).normal(0.0, beam_spread, (2, rays))
             design = replace(design, disk_u=design.disk_u + errors[0],
                              disk_v=design.disk_v + errors[1])
-        self._bands = []
-        sphere_radius = self.lens.sphere_radius
-        for (wavelength, _), weight in zip(bands, weights):
-            index = pmma_index(wavelength) + (self.lens.refractive_index - pmma_index(0.5876))
-            band_lens = replace(self.lens, refractive_index=index,
-                                focal_length=sphere_radius / (index - 1.0))
-            # The facets are cut once, for the design index: keep their slopes.
-            samples = replace(design, lens=band_lens)
-            self._bands.append((band_lens, samples, float(weight)))
+        # The facets are cut once, for the design index: every band traces the design
+        # samples (their slopes) with its own index, all bands in one pass (trace_bands).
+        offset = self.lens.refractive_index - pmma_index(0.5876)
+        self._indices = np.array([pmma_index(wavelength) + offset for wavelength, _ in bands])
+        self._weights = weights
         stride = max(1, int(round(rays / moving_rays))) if moving_rays else 1
-        self._moving_bands = [(band_lens, _every(samples, stride), weight)
-                              for band_lens, samples, weight in self._bands]
+        self._samples = design
+        self._moving_samples = _every(design, stride)
         self.moving_stride = stride
         self.move_tolerance = move_tolerance
         self.angle_tolerance = angle_tolerance
@@ -155,7 +153,7 @@ class LensFlux:
                     and (moving or not self._field_is_sparse)):
                 return self._field
         sparse = moving and self.moving_stride > 1
-        self._field = self._trace(T, s0, self._moving_bands if sparse else self._bands)
+        self._field = self._trace(T, s0, self._moving_samples if sparse else self._samples)
         self._field_is_sparse = sparse
         self._key = (T.copy(), s0.copy())
         self.traces += 1
@@ -166,18 +164,17 @@ class LensFlux:
         """Tell whether the present field was traced with the moving lens's fewer rays."""
         return self._field_is_sparse
 
-    def _trace(self, T_world_lens, s0, bands):
-        points, powers, lost, incident = [], [], 0.0, 0.0
-        for band_lens, samples, weight in bands:
-            result = trace(band_lens, samples, s0, T_world_lens, irradiance=1.0)
-            hit = result.hit
-            points.append(result.points[hit, :2])
-            powers.append(weight * result.power[hit])
-            incident += weight * result.incident_power
-            lost += weight * (result.incident_power * band_lens.transmission
-                              - float(result.power[result.hit].sum()))
+    def _trace(self, T_world_lens, s0, samples):
+        """Trace `samples` in every band at once; return the FluxField (per unit DNI)."""
+        result = trace_bands(self.lens, samples, self._indices, s0, T_world_lens,
+                             irradiance=1.0)
+        hit = result.hit
+        power = self._weights[:, None] * result.power
+        # the rays that reach the panel, band after band (as B separate traces gave them)
+        incident = result.incident_power
+        lost = incident * self.lens.transmission - float(power[hit].sum())
         lens_axis = T_world_lens[:3, 2]
-        return FluxField(points=np.concatenate(points), power=np.concatenate(powers),
+        return FluxField(points=result.points[hit][:, :2], power=power[hit],
                          direct=max(0.0, -float(s0[2])), lens_centre=T_world_lens[:3, 3].copy(),
                          lens_axis=lens_axis.copy(), aperture_radius=self.lens.aperture_radius,
                          sun_ray=s0.copy(),
