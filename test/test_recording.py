@@ -60,9 +60,10 @@ def record_graph(tmp_path, stats_to_wait_for, kill=False):
             depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
         stats = graph.collect(ThermalStats, 'thermal/stats',
                               QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        # chunks close at 0.5 s of wall time or 256 KiB (an RGB frame is 900 KiB)
         recorder = Recorder(bag, camera_decimation=4, use_sim_time=True,
                             log_dir=str(tmp_path / 'logs'), chunk_period=0.5,
-                            env=node_environment()).start()
+                            chunk_size_bytes=256 << 10, env=node_environment()).start()
         try:
             # counted from when the recorder hears thermal/stats (the test's own
             # subscription is the other one): the world may run far ahead of its start-up
@@ -70,6 +71,10 @@ def record_graph(tmp_path, stats_to_wait_for, kill=False):
             graph.wait_until(lambda: graph.helper.count_subscribers('/thermal/stats') >= 2,
                              60.0, 'the recorder subscribing to thermal/stats')
             stats.wait_for_count(len(stats.messages) + stats_to_wait_for, 120.0)
+            # and until chunks are on disk: the recorder discovers topics and closes chunks on
+            # its own wall-clock schedule, which a 4x world can outrun
+            graph.wait_until(lambda: len(chunks_on_disk(bag)) >= 3, 120.0,
+                             'three chunks of the recording on disk')
         finally:
             last_clock = stamp_to_nanoseconds(clock.messages[-1].clock)
             if kill:
@@ -77,6 +82,21 @@ def record_graph(tmp_path, stats_to_wait_for, kill=False):
             else:
                 recorder.stop()
     return bag, last_clock
+
+
+def chunks_on_disk(bag):
+    """Return the complete Chunk records in the bag's file so far (being written or cut)."""
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+    chunks = []
+    try:
+        with open(bag_file(bag), 'rb') as stream:
+            for record in StreamReader(stream, emit_chunks=True).records:
+                if isinstance(record, Chunk):
+                    chunks.append(record)
+    except Exception:   # noqa: B902 - no file yet, or the record being written
+        pass
+    return chunks
 
 
 def rosbags_counts(bag):
@@ -144,17 +164,7 @@ def test_after_a_sigkill_the_bag_keeps_all_but_its_last_chunk(tmp_path):
     assert {'/clock', '/joint_states', '/thermal/stats'} <= topics
     # the chunks' own message indexes (written after each chunk) bound what was lost: every
     # message of every chunk that reached the file is read back
-    with open(path, 'rb') as stream:
-        from mcap.records import Chunk
-        from mcap.stream_reader import StreamReader
-        chunks = []
-        try:
-            for record in StreamReader(stream, emit_chunks=True).records:
-                if isinstance(record, Chunk):
-                    chunks.append(record)
-        except Exception:   # noqa: B902 - the cut-off last record
-            pass
-    in_chunks = sum(len(_chunk_messages(chunk)) for chunk in chunks)
+    in_chunks = sum(len(_chunk_messages(chunk)) for chunk in chunks_on_disk(bag))
     assert len(messages) == in_chunks
     # and what was lost is at most the open chunk: chunk_period (0.5 s wall) plus the
     # writer's queue and the kill's latency (2 s on a loaded machine), at 4 simulated s per s
