@@ -192,6 +192,10 @@ class DobotDriverNode(DeviceActionNode):
                 'device refused the move: '
                 + '; '.join(proto.alarm_description(a) for a in alarms)))
         if self.client.executed_index() >= index:
+            # the pose above was read before the index: the arm may have moved on to the
+            # target since (a CI run reported joints 4e-6 rad short of it); read it again
+            pose = self.client.get_pose()
+            result = pose_result(pose)
             far = self._arrival_error(mode, target, pose)
             if not far:
                 return MoveProgress(done=True, success=True, result=result,
