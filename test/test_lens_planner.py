@@ -1,8 +1,10 @@
 """
 The lens planner in the simulated graph, every node its own process (Sec. II-B, IV-A, V-B).
 
-The controller's nodes read a rig file whose T_robot_world is off by 5.4 mm and 2 deg; the
-world keeps the true one. In one graph, in the order a painting uses them:
+The controller's nodes read a rig file whose T_robot_world is off by 5.4 mm and 2 deg, and a
+site file that puts the rig in Lausanne (the world stands in Munich): the sun must come from
+the spots, not from the ephemeris. The world keeps the true ones. In one graph, in the
+order a painting uses them:
 
 - goals that cannot be served are refused with their reason (no sun estimate yet, a
   non-finite target, an unreachable one, a target off the panel);
@@ -48,6 +50,17 @@ def wrong_rig_file(tmp_path):
     rig['world_in_robot'] = [v + d for v, d in zip(rig['world_in_robot'], RIG_OFFSET)]
     rig['world_yaw'] = rig['world_yaw'] + RIG_TURN
     path = tmp_path / 'rig_off.yaml'
+    with open(path, 'w') as stream:
+        yaml.safe_dump(document, stream)
+    return str(path)
+
+
+def site_elsewhere_file(tmp_path):
+    """Write a site file for Lausanne, 5 deg west and 1.6 deg south of the world's site."""
+    document = {'/**': {'ros__parameters': {'site': {
+        'latitude_deg': 46.5197, 'longitude_deg': 6.6323, 'elevation': 400.0,
+        'temperature': 20.0, 'pressure': 101325.0}}}}
+    path = tmp_path / 'site_elsewhere.yaml'
     with open(path, 'w') as stream:
         yaml.safe_dump(document, stream)
     return str(path)
@@ -106,9 +119,11 @@ def planner(tmp_path_factory):
     """Run the graph once for the module: calibrations build on each other, as in a run."""
     tmp_path = tmp_path_factory.mktemp('lens_planner')
     rig = {'rig_file': wrong_rig_file(tmp_path)}
+    site = {'site_file': site_elsewhere_file(tmp_path)}
     overrides = {'sim_world': {'real_time_factor': 4.0, 'flux_rays': 20000},
-                 'spot_detector': rig, 'sun_estimator': rig,
-                 'lens_planner': {**rig, 'calibration_dir': str(tmp_path / 'calibration')}}
+                 'spot_detector': rig, 'sun_estimator': {**rig, **site},
+                 'lens_planner': {**rig, **site,
+                                  'calibration_dir': str(tmp_path / 'calibration')}}
     with graph_of_processes(tmp_path, NODES, overrides) as (_, graph):
         yield Planner(graph)
 
