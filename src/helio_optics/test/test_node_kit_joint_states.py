@@ -64,6 +64,46 @@ def test_a_joint_farther_than_the_tolerance_fails_the_lookup_naming_it():
     assert lookup.gap == pytest.approx(0.03)
 
 
+def still_then_moving(buffer, times, start_moving):
+    """Feed samples of an arm held at moving_joints(0) until `start_moving` [s], then moving."""
+    for t in times:
+        x = moving_joints(max(0.0, t - start_moving))
+        buffer.add(t, ARM, [x[0], x[1], x[2], 0.0])
+        buffer.add(t, WRIST, x[3:])
+
+
+def test_a_joint_at_rest_is_known_across_gaps_up_to_rest_hold():
+    # joint states every 0.4 s of the stamps' clock (20 Hz of wall time beside a world at
+    # 8x), the arm still until 2.0 s: an image between two equal samples has their pose
+    buffer = JointStateBuffer()
+    still_then_moving(buffer, [0.0, 0.4, 0.8, 1.2, 1.6, 2.0, 2.4], start_moving=2.0)
+    assert not buffer.at(1.0, 0.1)                                 # the plain tolerance
+    lookup = buffer.at(1.0, 0.1, rest_hold=0.5)
+    assert lookup.positions == pytest.approx(moving_joints(0.0), abs=1e-12)
+    assert lookup.gap == pytest.approx(0.2)
+    # between two different samples the arm moved: no pose, whatever the hold
+    lookup = buffer.at(2.2, 0.1, rest_hold=0.5)
+    assert not lookup and 'at rest 0.5 s' in lookup.reason
+    # and a gap longer than the hold is not bridged
+    assert not buffer.at(1.0, 0.1, rest_hold=0.15)
+
+
+def test_an_image_newer_than_the_joint_states_has_the_pose_of_an_arm_at_rest():
+    buffer = JointStateBuffer()
+    still_then_moving(buffer, [0.0, 0.4, 0.8], start_moving=10.0)
+    lookup = buffer.at(1.1, 0.1, rest_hold=0.5)                   # 0.3 s after the newest
+    assert lookup.positions == pytest.approx(moving_joints(0.0), abs=1e-12)
+    assert not buffer.at(1.4, 0.1, rest_hold=0.5)                 # past the hold
+    # the newest two samples differ: the arm was moving, its pose now is unknown
+    moving = JointStateBuffer()
+    still_then_moving(moving, [0.0, 0.4, 0.8], start_moving=0.5)
+    assert not moving.at(1.1, 0.1, rest_hold=0.5)
+    # one sample says nothing about rest
+    single = JointStateBuffer()
+    still_then_moving(single, [0.0], start_moving=10.0)
+    assert not single.at(0.3, 0.1, rest_hold=0.5)
+
+
 def test_latest_is_refused_when_a_driver_went_quiet():
     buffer = JointStateBuffer()
     feed_drivers(buffer, [1.0, 2.0, 3.0], [1.0])

@@ -77,6 +77,12 @@ class ThermalMonitorNode(Node):
             self, 'joint_state_tolerance', 0.3,
             'Largest time between an image and the joint states used for it [s].',
             0.0, 10.0)
+        self.joint_rest_hold = declare(
+            self, 'joint_rest_hold', 1.0,
+            'A joint at rest (equal samples around the image, or the newest two equal for an '
+            'image newer than them) is known this far from the image; bridges the gaps a '
+            "fast simulated clock leaves between the drivers' wall-clock joint states while "
+            'the lens is held on a dot (0: off) [s].', 0.0, 10.0)
         self.rig, _ = declare_rig(self)
         follow_world_calibration(self, self.rig)     # T_robot_world from the marker
         self.frame_id = declare(self, 'frame_id', 'thermal',
@@ -190,7 +196,7 @@ class ThermalMonitorNode(Node):
             return None, None
         if self.camera is None or (self.camera.height, self.camera.width) != tuple(shape):
             return None, None
-        lookup = self.joints.at(stamp, self.joint_state_tolerance)
+        lookup = self.joints.at(stamp, self.joint_state_tolerance, self.joint_rest_hold)
         joints = lookup.positions
         if joints is None:
             self.get_logger().warn(f'thermal camera pose unknown (no window, no hottest point): '

@@ -111,13 +111,20 @@ class JointStateBuffer:
         newest = [s[-1] for s in self._stamps.values() if s]
         return max(newest) if newest else None
 
-    def at(self, stamp, tolerance):
+    def at(self, stamp, tolerance, rest_hold=0.0, rest_epsilon=1e-6):
         """
         Return the joints at `stamp` [s] (JointLookup).
 
         Each joint is interpolated linearly between the samples around `stamp` when both lie
         within `tolerance` [s] of it; otherwise its nearest sample is used if that lies within
         `tolerance`. A joint with no sample that close makes the lookup fail, naming it.
+
+        A joint at rest is known farther than that, up to `rest_hold` [s] (0: never): when
+        the samples on both sides of `stamp` are equal (within `rest_epsilon` [rad]), or when
+        `stamp` is newer than every sample and the newest two are equal. A publisher that
+        samples the joints at a few hertz of wall time beside a simulation running several
+        times faster leaves gaps of 0.3-0.5 s of the stamps' clock: an arm held still for a
+        dot keeps its pose across them, a moving one does not pass for still.
         """
         stamp = float(stamp)
         positions, worst = [], 0.0
@@ -139,12 +146,33 @@ class JointStateBuffer:
                 continue
             nearest = min(gaps, key=gaps.get)
             if gaps[nearest] > tolerance:
-                return JointLookup(reason=f'nearest {name} is {gaps[nearest]:.3f} s from the '
-                                          f'asked time (tolerance {tolerance:g} s)',
-                                   gap=gaps[nearest])
+                rest = self._at_rest(stamps, values, before, after, stamp, rest_hold,
+                                     rest_epsilon)
+                if rest is None:
+                    return JointLookup(reason=f'nearest {name} is {gaps[nearest]:.3f} s from '
+                                              f'the asked time (tolerance {tolerance:g} s'
+                                              + (f', at rest {rest_hold:g} s' if rest_hold > 0.0
+                                                 else '') + ')',
+                                       gap=gaps[nearest])
+                positions.append(rest)
+                worst = max(worst, gaps[nearest])
+                continue
             positions.append(values[nearest])
             worst = max(worst, gaps[nearest])
         return JointLookup(positions=np.array(positions), gap=worst)
+
+    @staticmethod
+    def _at_rest(stamps, values, before, after, stamp, rest_hold, rest_epsilon):
+        """Return the joint's value if it rests around `stamp` (see ``at``), else None."""
+        if not rest_hold > 0.0 or before is None:
+            return None
+        if after is not None:
+            still = abs(values[after] - values[before]) <= rest_epsilon
+            near = max(stamp - stamps[before], stamps[after] - stamp) <= rest_hold
+        else:                        # newer than every sample: the newest two agree
+            still = before > 0 and abs(values[before] - values[before - 1]) <= rest_epsilon
+            near = stamp - stamps[before] <= rest_hold
+        return values[before] if still and near else None
 
     def latest(self, now, max_age=0.0):
         """
