@@ -157,6 +157,12 @@ class PainterNode(Node):
         self.window_radius = declare(self, 'window_radius', 0.004,
                                      'Radius of the N_p window around the dot (world) [m].',
                                      0.0005, 0.05)
+        self.window_separation = declare(
+            self, 'window_separation', 0.006,
+            'Window rule: dots burnt one after the other lie at least this far apart where the '
+            "plan can (the last dot's hot region, about 2 mm around it, outside the next "
+            "one's window); a next dot closer than this waits for N_p = 0 as the paper's "
+            'rule does [m].', 0.0, 0.1)
         self.max_heating = declare(self, 'max_heating', 90.0,
                                    'A dot held longer than this is given up [s].', 1.0, 3600.0)
         self.max_cooling = declare(self, 'max_cooling', 60.0,
@@ -507,6 +513,8 @@ class PainterNode(Node):
         try:
             options = options_from_goal(goal)
             options.d_lp, options.retreat = self.heating_distance, self.retreat_offset
+            if (goal.cooling or self.cooling) == 'window':     # no hot neighbour next
+                options.min_separation = self.window_separation
             sun = point_to_array(self.sun.direction)
             if goal.points:
                 points = np.array([[p.x, p.y] for p in goal.points], dtype=float)
@@ -587,8 +595,12 @@ class PainterNode(Node):
             feedback.index = i
             feedback.elapsed = self._now() - began
             feedback.eta = mean * remaining
+            # the window rule goes on at once, but not into this dot's hot region
+            later = [j for j in todo if j > i]
+            hot_next = cooling == 'window' and bool(later) and float(np.hypot(
+                *(plan.dots[later[0]] - target))) < self.window_separation
             outcome = await self._paint_dot(goal_handle, feedback, i, target, n_p_target,
-                                            cooling, goal.dry_run, result)
+                                            cooling, goal.dry_run, result, hot_next)
             cycles.append(outcome['end'] - outcome['start'])
             self._journal.dot(**outcome)
             if outcome['outcome'] == 'burnt':
@@ -622,8 +634,13 @@ class PainterNode(Node):
                                'stale thermal stream and done again')
 
     async def _paint_dot(self, goal_handle, feedback, index, target, n_p_target, cooling,
-                         dry_run, result):
-        """Burn one dot (Algorithm 1 lines 6-14); return its journal record's fields."""
+                         dry_run, result, hot_next=False):
+        """
+        Burn one dot (Algorithm 1 lines 6-14); return its journal record's fields.
+
+        `hot_next`: with the window rule, the next dot lies in this one's hot region, so
+        this dot retreats and waits for N_p = 0 in its window before the next begins.
+        """
         start = self._now()
         record = {'index': int(index), 'target': [float(target[0]), float(target[1])],
                   'n_p_target': n_p_target, 'start': start, 'end': start, 'dwell': 0.0,
@@ -639,7 +656,7 @@ class PainterNode(Node):
             return record
         settings = CycleSettings(n_p_target=n_p_target, max_heating=self.max_heating,
                                  max_cooling=self.max_cooling,
-                                 wait_for_zero=(cooling == 'paper'))
+                                 wait_for_zero=(cooling == 'paper' or hot_next))
         cycle = DotCycle(settings)
         window = cooling == 'window'
         self._set_window(target if window else None)
@@ -688,7 +705,7 @@ class PainterNode(Node):
                 goal_handle.publish_feedback(feedback)
                 record['t_max'] = max(record['t_max'], float(t_max))
                 decision = cycle.update(self._now(), n_p, t_max, stats.camera_cap)
-            if window and decision is Decision.RETREAT:
+            if window and not hot_next and decision is Decision.RETREAT:
                 # the window rule moves on at once: the move to the next dot begins with
                 # the retreat along the sun ray (lens_moves), so no separate retreat here;
                 # after the last dot, or when anything stops the painting, _paint retreats

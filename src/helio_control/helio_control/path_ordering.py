@@ -21,6 +21,13 @@ Orderings (``ORDERINGS``):
 All solvers see an open path as a cycle through one extra 'depot' node at the same cost
 from every dot, so the cycle's two depot edges cost the same whatever the order and the
 rest is the best open path with free ends.
+
+Hot neighbours (issue 13, the window rule): a dot burnt right after a neighbour closer than
+``separation`` would start inside the last one's hot region, where the painter must wait
+for it to cool (the paper's rule, about 3 s). ``TravelMetric`` adds that wait,
+``separation_penalty``, to such a step of its matrix, so every solver but ``paper`` orders
+around hot neighbours when jumping elsewhere costs less than waiting; ``path_time`` stays
+the arm's own time and ``close_steps`` counts the steps left closer than ``separation``.
 """
 
 from collections import deque
@@ -43,13 +50,25 @@ def default_budget(count):
 class TravelMetric:
     """Move times between dots (retreat-pose joints) and world distances."""
 
-    def __init__(self, joints, limits, points=None):
-        """Joints (N x 5) [rad] of each dot's retreat pose; points (N x 2) world [m]."""
+    def __init__(self, joints, limits, points=None, separation=0.0, separation_penalty=0.0):
+        """
+        Joints (N x 5) [rad] of each dot's retreat pose; points (N x 2) world [m].
+
+        A step between two dots closer than `separation` [m] costs `separation_penalty` [s]
+        more in ``matrix`` (the wait for a hot neighbour to cool); it needs `points`.
+        """
         self.joints = np.asarray(joints, dtype=float).reshape(-1, 5)
         self.limits = limits
         self.points = None if points is None else np.asarray(points, dtype=float)
         if len(self.joints) > MAX_DOTS:
             raise ValueError(f'{len(self.joints)} dots: at most {MAX_DOTS} can be ordered')
+        if not (separation >= 0.0 and separation_penalty >= 0.0):
+            raise ValueError(f'separation and its penalty must be >= 0, got {separation} m '
+                             f'and {separation_penalty} s')
+        if separation > 0.0 and self.points is None:
+            raise ValueError('a separation between successive dots needs their points')
+        self.separation = float(separation)
+        self.separation_penalty = float(separation_penalty)
         self._matrix = None
 
     def __len__(self):
@@ -57,10 +76,26 @@ class TravelMetric:
         return len(self.joints)
 
     def matrix(self):
-        """Return the N x N move-time matrix [s] (float32, computed once)."""
+        """Return the N x N move-time matrix [s] with hot-neighbour waits (float32, once)."""
         if self._matrix is None:
             self._matrix = move_time_matrix(self.joints, self.joints, self.limits)
+            if self.separation > 0.0 and self.separation_penalty > 0.0:
+                for start in range(0, len(self.points), 1024):       # bounded memory
+                    rows = self.points[start:start + 1024]
+                    close = np.hypot(rows[:, None, 0] - self.points[None, :, 0],
+                                     rows[:, None, 1] - self.points[None, :, 1]) \
+                        < self.separation
+                    self._matrix[start:start + 1024][close] += self.separation_penalty
+                np.fill_diagonal(self._matrix, 0.0)
         return self._matrix
+
+    def close_steps(self, order):
+        """Return how many successive dots along `order` are closer than `separation`."""
+        order = np.asarray(order, dtype=int)
+        if self.separation <= 0.0 or len(order) < 2:
+            return 0
+        steps = np.diff(self.points[order], axis=0)
+        return int(np.sum(np.hypot(steps[:, 0], steps[:, 1]) < self.separation))
 
     def path_time(self, order):
         """Sum of the move times along `order` [s] (exact, float64)."""

@@ -73,6 +73,7 @@ class PlanOptions:
     d_lp: float = 0.082
     retreat: float = 0.03
     solver_budget_s: float = 0.0
+    min_separation: float = 0.0
     sun_elevation_deg: float = 60.0
     sun_azimuth_deg: float = 0.0
 
@@ -95,6 +96,7 @@ class PlanOptions:
                      'threshold_offset'):
             number(name, positive=False)
         number('solver_budget_s', allow_zero=True)
+        number('min_separation', allow_zero=True)
         if self.canvas_size > self.max_canvas_size:
             raise PlanOptionsError(
                 f'canvas_size {self.canvas_size} m is larger than the rig can reach: at most '
@@ -368,10 +370,13 @@ def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
         raise PlanError(f'no dot can be painted: all {len(points)} rejected{detail}')
     joints_heat = reach.joints_heat[reachable]
     joints_retreat = reach.joints_retreat[reachable]
-    metric = TravelMetric(joints_retreat, limits, points[kept])
+    # successive dots closer than min_separation cost the hot neighbour's cooling wait
+    metric = TravelMetric(joints_retreat, limits, points[kept], options.min_separation,
+                          model.cooling_s)
     uv = grid_uv[kept] if np.all(grid_uv[kept] >= 0) else None
     budget = options.solver_budget_s or None
     order = order_dots(metric, options.ordering, uv, budget)
+    parameters['close_steps'] = metric.close_steps(order)
     travel = move_time(joints_retreat[order[:-1]], joints_retreat[order[1:]], limits)
     approach = move_time(joints_retreat[order], joints_heat[order], limits)
     estimate = estimate_time(model, n_p[kept][order], approach, approach, travel)

@@ -126,3 +126,37 @@ def test_nearest_2opt_travels_at_most_085_of_the_paper_order(sample_tours, name)
 def test_default_ordering_is_within_3_percent_of_the_best_tour_found(sample_tours, name):
     times = sample_tours[name]
     assert times[PlanOptions().ordering] <= 1.03 * min(times.values())
+
+
+@pytest.mark.parametrize('method', ['nearest', 'nearest_2opt', 'fast_tsp'])
+def test_a_separation_keeps_successive_dots_out_of_each_others_hot_region(method):
+    # the sample word at a 3 mm pitch: every dot has neighbours 3-4.2 mm away, so the
+    # shortest tour steps to a hot neighbour almost every time
+    options = PlanOptions(ordering='paper', dot_radius=0.003)
+    plan = plan_picture('sample:text', options)
+    reach = check_reach(plan.dots, default_rig()[0], options.nominal_sun_ray(), options.d_lp,
+                        options.retreat)
+    plain = TravelMetric(reach.joints_retreat, LIMITS, plan.dots)
+    apart = TravelMetric(reach.joints_retreat, LIMITS, plan.dots, separation=0.0065,
+                         separation_penalty=3.1)
+    near_order = order_dots(plain, method, plan.grid_uv)
+    apart_order = order_dots(apart, method, plan.grid_uv)
+    assert sorted(apart_order.tolist()) == list(range(len(plan.dots)))
+    assert apart.close_steps(near_order) > 0.8 * (len(plan.dots) - 1)
+    steps = np.diff(plan.dots[apart_order], axis=0)
+    close = int(np.sum(np.hypot(steps[:, 0], steps[:, 1]) < 0.0065))
+    assert close == apart.close_steps(apart_order)
+    # the greedy walk may corner itself among the last dots; the improved tours do not
+    assert close <= (3 if method == 'nearest' else 0)
+    # the arm's time is what the matrix of the plain metric says; jumping costs under a
+    # second per dot, where a hot neighbour would wait the cooling (3.1 s)
+    extra = apart.path_time(apart_order) - plain.path_time(near_order)
+    assert 0.0 < extra < 1.0 * len(plan.dots)
+
+
+def test_a_separation_needs_points_and_is_not_negative():
+    joints = np.zeros((3, 5))
+    with pytest.raises(ValueError, match='needs their points'):
+        TravelMetric(joints, LIMITS, separation=0.005, separation_penalty=3.0)
+    with pytest.raises(ValueError, match='>= 0'):
+        TravelMetric(joints, LIMITS, np.zeros((3, 2)), separation=-0.001)
