@@ -136,6 +136,10 @@ def test_goals_that_cannot_be_served_are_refused_with_the_reason(planner):
     assert not response.result.success and 'not finite' in response.result.message
     response = planner.run(FocusLens, 'focus', focus_goal(0.07, 0.07, z=0.01))
     assert not response.result.success and 'off the panel' in response.result.message
+    goal = focus_goal(0.07, 0.07)
+    goal.travel_d_lp = 0.09                  # 0.8 cm from the heating distance: a burn trail
+    response = planner.run(FocusLens, 'focus', goal)
+    assert not response.result.success and 'safe_margin' in response.result.message
 
 
 def test_world_calibration_recovers_the_true_transform(planner):

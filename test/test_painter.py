@@ -24,7 +24,7 @@ from sensor_msgs.msg import Image
 NODES = ('sim_world', 'dobot_driver', 'servo_driver', 'spot_detector', 'thermal_monitor',
          'sun_estimator', 'lens_planner', 'painter')
 TIMEOUT = 900.0
-ROW = 4                                   # dots per rule
+ROW = 6                                   # dots per rule
 PITCH = 0.008                             # between dots [m]: outside each other's hot region
 
 
@@ -98,30 +98,49 @@ def test_the_window_rule_paints_faster_than_the_papers_with_dots_as_even(paintin
         assert result.success, result.message
         assert result.dots_burnt == ROW
         assert [d.outcome for d in dots] == ['burnt'] * ROW
-        # a dot's cycle: from the start of its move to the start of the next one's; a dot
-        # heated again (its heating broken off by a stale thermal stream on the loaded
-        # machine) is not a cycle of either rule, and is left out
-        starts = [d.start for d in dots] + [dots[-1].end]
-        clean = [b - a for d, a, b in zip(dots, starts, starts[1:]) if d.restarts == 0]
-        assert len(clean) >= ROW // 2, f'{rule}: {ROW - len(clean)} of {ROW} dots heated again'
-        cycles[rule] = float(np.mean(clean))
+        # a dot's cycle: from the start of its move to the start of the next one's. The
+        # first dot's move comes from wherever the last goal left the lens, and the last dot
+        # has no next (with the window rule its retreat would not count): both are left out,
+        # and so is a dot heated again (its heating broken off by a stale thermal stream on
+        # a loaded machine), which is a cycle of neither rule
+        starts = [d.start for d in dots]
+        clean = [b - a for d, a, b in zip(dots[1:], starts[1:], starts[2:]) if d.restarts == 0]
+        assert len(clean) >= ROW // 2, f'{rule}: {ROW - 2 - len(clean)} cycles heated again'
+        # the median: on a loaded 2-core machine one stalled decision can add 5 s to a cycle
+        cycles[rule] = float(np.median(clean))
         charred = dots_at(painting.charred_dots(), targets)
         assert all(dot is not None for dot in charred), f'{rule}: a dot is not charred'
         errors = [math.hypot(d.x - t.x, d.y - t.y) for d, t in zip(charred, targets)]
         diameters = np.array([d.diameter for d in charred])
         spreads[rule] = float(np.std(diameters) / np.mean(diameters))
-        print(f'{rule} rule: {cycles[rule]:.1f} s per dot (sim, {len(clean)} of {ROW} dots '
-              f'not heated again), dwell '
+        print(f'{rule} rule: {cycles[rule]:.2f} s per dot (sim, {len(clean)} of {ROW - 2} '
+              f'cycles not heated again), dwell '
               f'{np.mean([d.dwell for d in dots]):.1f} s, placement error mean '
               f'{np.mean(errors) * 1e3:.3f} mm, max {np.max(errors) * 1e3:.3f} mm, diameter '
               f'{np.mean(diameters) * 1e3:.2f} mm, CV {spreads[rule] * 100:.1f} %')
         assert np.mean(errors) <= 0.3e-3
     saved = 1.0 - cycles['window'] / cycles['paper']
     print(f'the window rule saves {saved * 100:.0f} % per dot')
-    # Issue 13 asks for 15 %. Here the paper's rule spends 5.3-7.0 s per dot beside the
-    # heating (retreat, the wait for N_p = 0, travel, approach), the window rule 2.1-2.3 s
-    # (its move to the next dot starts with the retreat); the heating, 16.3-17.1 s of a
-    # ~22 s cycle, is the same process in both but varies by up to 0.8 s between runs, so
-    # the saving measured 13, 17 and 20 % in three runs: 15 % is not met every time.
-    assert saved >= 0.10
+    # Issue 13 asks for 15 %. Beside the heating (15-17 s to N_p = 30, the same process in
+    # both rules) the paper's rule spends 4.8-6.5 s per dot (retreat, the wait for N_p = 0,
+    # travel and approach at the 3 cm retreat), the window rule 1.4-2.0 s (no wait; its move
+    # to the next dot starts with the retreat, and travels 1.5 cm beyond the heating
+    # distance): 16-17 % at equal heating, 18-20 % in runs of this test
+    assert saved >= 0.15
     assert spreads['window'] <= max(spreads['paper'], 0.10)
+
+
+def test_a_smaller_n_p_target_burns_smaller_dots(painting):
+    # the paper's Fig. 8d: dot size grows with N_p; the rows above burn 1.96-1.99 mm dots at
+    # N_p 30, and a charred area that grows with N_p puts N_p 15 near 1.97 / sqrt(2) mm
+    targets = [Point(x=0.05 + i * PITCH, y=0.11, z=0.0) for i in range(2)]
+    result, dots = painting.paint('small', points=targets, n_p_target=15)
+    assert result.success, result.message
+    assert [d.n_p_target for d in dots] == [15, 15]
+    assert all(15 <= d.peak_n_p < 30 for d in dots)
+    charred = dots_at(painting.charred_dots(), targets)
+    assert all(dot is not None for dot in charred), 'a dot is not charred'
+    diameters = [d.diameter for d in charred]
+    print(f'\nN_p 15: diameters {[round(d * 1e3, 2) for d in diameters]} mm, dwell '
+          f'{[round(d.dwell, 1) for d in dots]} s')
+    assert all(1.0e-3 < d < 1.75e-3 for d in diameters)

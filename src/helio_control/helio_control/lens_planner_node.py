@@ -456,8 +456,14 @@ class LensPlannerNode(Node):
         d_lp = goal.d_lp if goal.d_lp != 0.0 else self.heating_distance
         if not (math.isfinite(d_lp) and d_lp > 0.0):
             raise GoalFailed(f'd_lp must be a finite distance > 0 m, got {goal.d_lp}')
+        travel = goal.travel_d_lp if goal.travel_d_lp != 0.0 else self.travel_distance
+        if not (math.isfinite(travel) and abs(travel - self.heating_distance)
+                >= self.safe_margin - 1e-9):
+            raise GoalFailed(f'travel_d_lp {goal.travel_d_lp} m: the focus may move sideways '
+                             f'only {self.safe_margin * 100:.1f} cm or more from the heating '
+                             f'distance {self.heating_distance * 100:.1f} cm (safe_margin)')
         alive = self.lease.alive(self._now(), time.monotonic())   # a client to outlive?
-        legs, x_now = self._plan_focus(target, d_lp)
+        legs, x_now = self._plan_focus(target, d_lp, travel)
         solution = self.targeting.aim(target, self._sun_ray(), d_lp,
                                       self.rig.parameters.T_robot_world)
         feedback = FocusLens.Feedback()
@@ -482,15 +488,20 @@ class LensPlannerNode(Node):
                           f'{correction * 1e3:.3f} mm; lens within '
                           f'{result.position_error * 1e3:.3f} mm of the command')
 
-    def _plan_focus(self, target, d_lp):
-        """Return (legs, present joints) that bring the focus to `target` at `d_lp`."""
+    def _plan_focus(self, target, d_lp, travel=None):
+        """
+        Return (legs, present joints) that bring the focus to `target` at `d_lp`.
+
+        The focus moves sideways at `travel` (default ``travel_distance``), else at the first
+        reachable distance a safe margin from the heating distance.
+        """
         sun = self._sun_ray()
         x_now = self._present_joints()
         try:
             legs = lens_moves.plan_focus_moves(
                 self.targeting, x_now, target, d_lp, sun,
                 self.rig.parameters.T_robot_world, self.heating_distance,
-                (self.travel_distance, self.heating_distance + self.safe_margin,
+                (travel or self.travel_distance, self.heating_distance + self.safe_margin,
                  self.heating_distance - self.safe_margin), self.safe_margin, self.same_point)
         except (lens_moves.MovePlanningError, ValueError) as error:
             raise GoalFailed(str(error)) from None

@@ -163,6 +163,12 @@ class PainterNode(Node):
             "plan can (the last dot's hot region, about 2 mm around it, outside the next "
             "one's window); a next dot closer than this waits for N_p = 0 as the paper's "
             'rule does [m].', 0.0, 0.1)
+        self.window_travel_offset = declare(
+            self, 'window_travel_offset', 0.015,
+            'Window rule: between dots the focus moves sideways this far beyond the heating '
+            "distance instead of at the lens planner's travel_distance (the paper's retreat, "
+            "which the window rule does not wait at); 1.5 cm puts 9 % of the heating peak's "
+            'irradiance on the wood (simulated lens) [m].', 0.0, 0.2)
         self.max_heating = declare(self, 'max_heating', 90.0,
                                    'A dot held longer than this is given up [s].', 1.0, 3600.0)
         self.max_cooling = declare(self, 'max_cooling', 60.0,
@@ -347,8 +353,8 @@ class PainterNode(Node):
         finally:
             self._focus_handles.remove(handle)
 
-    async def _focus(self, target, d_lp):
-        goal = FocusLens.Goal(d_lp=float(d_lp))
+    async def _focus(self, target, d_lp, travel_d_lp=0.0):
+        goal = FocusLens.Goal(d_lp=float(d_lp), travel_d_lp=float(travel_d_lp))
         goal.target.header.frame_id = 'world'
         goal.target.point.x, goal.target.point.y = float(target[0]), float(target[1])
         result = await self._run_action(self.focus, 'focus', goal)
@@ -663,7 +669,8 @@ class PainterNode(Node):
         while True:                                   # again after a cloud
             feedback.phase = 'moving'
             goal_handle.publish_feedback(feedback)
-            moved = await self._focus(target, d_heat)
+            moved = await self._focus(target, d_heat, (d_heat + self.window_travel_offset)
+                                      if window and self.window_travel_offset > 0.0 else 0.0)
             if not moved.success:
                 if self._at_heating is not None:      # the last dot's heating pose
                     self.get_logger().warning(await self._retreat('the move failed'))
