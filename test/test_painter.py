@@ -9,6 +9,7 @@ each checked against the world's char map (``sim/canvas``): every dot charred, o
 target, and of an even size. The time per dot of both rules is printed and compared.
 """
 
+import contextlib
 import math
 
 from conftest import graph_of_processes
@@ -61,15 +62,21 @@ class Painting:
         return charred_dots_of(charred, self.origin, self.cell)
 
 
-@pytest.fixture(scope='module')
-def painting(tmp_path_factory):
-    """Run the whole graph once for the module, as a painting session does."""
-    tmp_path = tmp_path_factory.mktemp('painter')
+@contextlib.contextmanager
+def painting_graph(tmp_path):
+    """Run the whole graph in `tmp_path` as a painting session does; yield its Painting."""
     overrides = {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000,
                                'canvas_rate': 1.0},
                  'lens_planner': {'calibration_dir': str(tmp_path / 'calibration')}}
     with graph_of_processes(tmp_path, NODES, overrides) as (_, graph):
         yield Painting(graph, tmp_path / 'runs')
+
+
+@pytest.fixture(scope='module')
+def painting(tmp_path_factory):
+    """Run the whole graph once for the module."""
+    with painting_graph(tmp_path_factory.mktemp('painter')) as session:
+        yield session
 
 
 def dots_at(dots, targets, radius=1.5e-3):

@@ -5,7 +5,9 @@ Every node runs as its own process (``sim_world``, both drivers on the emulated 
 ptys, ``spot_detector``, ``thermal_monitor``, ``sun_estimator``, ``lens_planner``,
 ``painter``). The painter calibrates robot-world from the marker, estimates the sun with the
 sweep (the world's sun is hidden from every controller node), plans ``sample:text`` (the
-word "SUN") at a 3 mm pitch and burns it with Algorithm 1. The truth is the world's char map
+word "SUN") at a 3 mm pitch and burns it with Algorithm 1, once with the paper's cooling rule
+and once, 3 cm above, with the window rule (no wait; the next dot never in the last one's
+hot region). The truth is the world's char map
 (``sim/canvas``): every planned dot must be charred, on its target (mean placement error at
 most 0.3 mm, the paper's mean errors being 0.99 mm of spacing and 0.61 mm laterally) and of
 an even size (coefficient of variation of the diameters at most 10 %).
@@ -13,12 +15,11 @@ an even size (coefficient of variation of the diameters at most 10 %).
 
 import math
 
-from conftest import graph_of_processes
 from geometry_msgs.msg import Point
 from helio_control.plan import Plan
 import numpy as np
 import pytest
-from test_painter import dots_at, NODES, Painting
+from test_painter import dots_at, painting_graph
 
 PICTURE = 'sample:text'
 PITCH = 0.003                 # dot pitch [m]: 2 mm dots 1 mm apart, each measurable alone
@@ -27,19 +28,26 @@ PITCH = 0.003                 # dot pitch [m]: 2 mm dots 1 mm apart, each measur
 @pytest.fixture(scope='module')
 def painting(tmp_path_factory):
     """Run the whole graph for the module."""
-    tmp_path = tmp_path_factory.mktemp('word')
-    overrides = {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000,
-                               'canvas_rate': 1.0},
-                 'lens_planner': {'calibration_dir': str(tmp_path / 'calibration')}}
-    with graph_of_processes(tmp_path, NODES, overrides) as (_, graph):
-        yield Painting(graph, tmp_path / 'runs')
+    with painting_graph(tmp_path_factory.mktemp('word')) as session:
+        yield session
 
 
-def test_a_sample_word_is_painted_with_every_dot_charred_on_target_and_even(painting):
-    result, journal = painting.paint('word', image_path=PICTURE, dot_radius=PITCH)
+@pytest.mark.parametrize('cooling, offset_y', [('paper', 0.05), ('window', 0.08)])
+def test_a_sample_word_is_painted_with_every_dot_charred_on_target_and_even(
+        painting, cooling, offset_y):
+    # the window rule's painting lies 3 cm above the first; its plan keeps each next dot
+    # out of the last one's hot region (7.5 mm), where the shortest tour steps closer 43 times
+    # in 44
+    name = f'word_{cooling}'
+    result, journal = painting.paint(name, image_path=PICTURE, dot_radius=PITCH,
+                                     cooling=cooling, offset_y=offset_y)
     assert result.success, result.message
-    with open(painting.run_root / 'word' / 'plan.json') as stream:
-        planned = Plan.from_json(stream.read()).dots
+    assert result.cloud_wait == 0.0, 'the clear sky was read as a cloud'
+    with open(painting.run_root / name / 'plan.json') as stream:
+        plan = Plan.from_json(stream.read())
+    planned = plan.dots
+    if cooling == 'window':
+        assert plan.parameters['close_steps'] == 0
     assert len(planned) >= 40 and result.dots_planned == len(planned)
     assert result.dots_burnt == len(planned)
     assert [dot.outcome for dot in journal] == ['burnt'] * len(planned)
@@ -52,7 +60,7 @@ def test_a_sample_word_is_painted_with_every_dot_charred_on_target_and_even(pain
     diameters = np.array([d.diameter for d in charred])
     spread = float(np.std(diameters) / np.mean(diameters))
     cycles = np.diff([dot.start for dot in journal] + [journal[-1].end])
-    print(f'\n{result.message}\n{len(targets)} dots: placement error mean '
+    print(f'\n{result.message}\n{cooling} rule, {len(targets)} dots: placement error mean '
           f'{errors.mean() * 1e3:.3f} mm, max {errors.max() * 1e3:.3f} mm (first 10 dots '
           f'{errors[:10].mean() * 1e3:.3f}, last 10 {errors[-10:].mean() * 1e3:.3f}); '
           f'diameter {diameters.mean() * 1e3:.2f} mm, CV {spread * 100:.1f} %; '

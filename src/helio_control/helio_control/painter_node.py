@@ -158,11 +158,11 @@ class PainterNode(Node):
                                      'Radius of the N_p window around the dot (world) [m].',
                                      0.0005, 0.05)
         self.window_separation = declare(
-            self, 'window_separation', 0.006,
+            self, 'window_separation', 0.0075,
             'Window rule: dots burnt one after the other lie at least this far apart where the '
-            "plan can (the last dot's hot region, about 2 mm around it, outside the next "
-            "one's window); a next dot closer than this waits for N_p = 0 as the paper's "
-            'rule does [m].', 0.0, 0.1)
+            "plan can (the last dot's hot region, about 2 mm around it, and a thermal pixel "
+            "outside the next one's window); a next dot closer than this waits for N_p = 0 as "
+            "the paper's rule does [m].", 0.0, 0.1)
         self.window_travel_offset = declare(
             self, 'window_travel_offset', 0.015,
             'Window rule: between dots the focus moves sideways this far beyond the heating '
