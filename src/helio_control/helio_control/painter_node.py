@@ -42,6 +42,7 @@ The run directory (``run_dir`` of the goal, else ``runs_dir``/<UTC time>) holds
 ``plan.json``, ``journal.jsonl`` (``helio_control.run_journal``) and ``resume.json``.
 """
 
+import dataclasses
 import datetime
 import glob
 import hashlib
@@ -52,6 +53,7 @@ import time
 import traceback
 
 from geometry_msgs.msg import PointStamped
+from helio_control.cycle_model import load_cycle_config
 from helio_control.dot_cycle import CycleSettings, Decision, DotCycle
 from helio_control.picture_input import picture_from_image_msg, PictureError
 from helio_control.plan import options_from_goal, Plan, plan_dots, plan_picture
@@ -209,6 +211,11 @@ class PainterNode(Node):
                                   'If the arm cannot retreat, turn the lens pitch by this to '
                                   'put the focus off the wood [rad].', 0.05, 1.5)
 
+        self.sun_max_sigma = declare(
+            self, 'sun_max_sigma', 0.2,
+            'A sun estimate on sun/estimate is used when the larger standard deviation of '
+            'its angles is at most this (the sweep gives 0.04-0.09 deg, its acquisition '
+            'about 0.3 deg); otherwise the painting sweeps first [deg].', 0.0, 90.0)
         self.sun = None
         self.stats = None
         self.stats_wall = 0.0
@@ -263,7 +270,11 @@ class PainterNode(Node):
             waiter.offer(message)
 
     def _on_sun(self, message):
-        if message.converged:
+        # sun/estimate also carries the sweep's acquisition (4 spots, sigma about 0.3 deg,
+        # 0.6 mm at the heating distance): a painting waits for an estimate this precise,
+        # and sweeps for one if it has none
+        sigma = math.degrees(math.sqrt(max(message.covariance[0], message.covariance[3])))
+        if message.converged and sigma <= self.sun_max_sigma:
             self.sun = message
 
     def _on_focus_cal(self, message):
@@ -519,15 +530,17 @@ class PainterNode(Node):
         try:
             options = options_from_goal(goal)
             options.d_lp, options.retreat = self.heating_distance, self.retreat_offset
-            if (goal.cooling or self.cooling) == 'window':     # no hot neighbour next
-                options.min_separation = self.window_separation
+            model, limits = load_cycle_config()
+            if (goal.cooling or self.cooling) == 'window':
+                options.min_separation = self.window_separation     # no hot neighbour next
+                model = dataclasses.replace(model, cooling_s=0.0)   # and no wait: estimate
             sun = point_to_array(self.sun.direction)
             if goal.points:
                 points = np.array([[p.x, p.y] for p in goal.points], dtype=float)
-                return plan_dots(points, options, self.rig, sun)
+                return plan_dots(points, options, self.rig, sun, cycle=(model, limits))
             picture = goal.image_path if goal.image_path else \
                 picture_from_image_msg(goal.image)
-            return plan_picture(picture, options, self.rig, sun)
+            return plan_picture(picture, options, self.rig, sun, cycle=(model, limits))
         except (PictureError, PlanError, PlanOptionsError, ValueError) as error:
             raise PaintFailed(f'cannot plan the painting: {error}') from None
 

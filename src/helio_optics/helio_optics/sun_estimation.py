@@ -354,10 +354,15 @@ class SunEstimator:
         directions = _directions(parameters)
         if not np.any(data.offsets):
             return np.repeat(directions[:, None, :], len(data), axis=1)
-        phi, theta = angles_from_direction(np.nan_to_num(directions, nan=0.0, posinf=0.0))
+        # a trial step out of the sky (NaN row) stays NaN: a placeholder ray for the angles,
+        # not a zero vector, which has none (a Levenberg-Marquardt trial of the ambiguity
+        # search once ended an estimate there: "cannot normalise a zero vector")
+        outside = ~np.all(np.isfinite(directions), axis=1)
+        phi, theta = angles_from_direction(np.where(outside[:, None], [0.0, 0.0, -1.0],
+                                                    directions))
         rays = direction_from_angles(phi[:, None] + data.offsets[None, :, 0],
                                      theta[:, None] + data.offsets[None, :, 1])
-        rays[~np.all(np.isfinite(directions), axis=1)] = np.nan
+        rays[outside] = np.nan
         return rays
 
     def _whitened(self, parameters, data):

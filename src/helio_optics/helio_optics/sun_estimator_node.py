@@ -19,6 +19,7 @@ import copy
 from dataclasses import dataclass, replace
 import datetime
 import math
+import traceback
 
 from helio_msgs.msg import SpotObservation, SunEstimate
 from helio_msgs.srv import EstimateSun
@@ -233,6 +234,8 @@ class SunEstimatorNode(Node):
             result = self.estimator.estimate(observations, method=method, trust=trust,
                                              **options)
         except ValueError as error:
+            self.get_logger().error(f'estimation failed on {len(observations)} observations:\n'
+                                    f'{traceback.format_exc()}')
             response.success = False
             response.message = f'estimation failed: {error}'
             return response

@@ -14,7 +14,7 @@ from helio_optics.geometry import angles_from_direction, direction_from_angles, 
 from helio_optics.geometry import rotation_y, rotation_z, unit
 from helio_optics.lens import LensParameters
 from helio_optics.spot import ellipse_from_contour
-from helio_optics.sun_estimation import Observation, SunEstimator, TrustSettings
+from helio_optics.sun_estimation import _Data, Observation, SunEstimator, TrustSettings
 import numpy as np
 import pytest
 from scipy.optimize import brentq, minimize_scalar
@@ -416,6 +416,24 @@ def test_observations_over_ten_minutes_give_the_sun_at_the_reference_time(method
     smeared = ESTIMATOR.estimate(observations, method=method)
     assert not smeared.trustworthy and 'chi-square' in smeared.reason
     assert angle_error_deg(smeared, reference) > 0.8
+
+
+def test_a_trial_sun_out_of_the_sky_is_infeasible_with_eq18_offsets_too():
+    """
+    A trial (s_x, s_y) outside the unit disc is an infeasible prediction, offsets or not.
+
+    Levenberg-Marquardt trials of the ambiguity search step there; with Eq 18 offsets on
+    the observations such a trial raised "cannot normalise a zero vector" and ended the
+    sweep's estimate, in 2 of 3 graph runs on a loaded machine.
+    """
+    rng = np.random.default_rng(3)
+    sun = diurnal_sun(0.0)
+    observations = [replace(o, angle_offset=(1e-3 * k, -2e-3 * k))
+                    for k, o in enumerate(sweep(sun, rng, noise=0.0))]
+    inside, outside = sun[:2], np.array([0.9, 0.9])        # (s_x, s_y) of the sun, and none
+    data = _Data(observations, range(len(observations)))
+    whitened = ESTIMATOR._whitened(np.array([inside, outside]), data)
+    assert np.all(np.isfinite(whitened[0])) and np.all(np.isnan(whitened[1]))
 
 
 # -- bad input --------------------------------------------------------------------------------
