@@ -11,9 +11,9 @@ it the far field is used; the energy this moves is booked as ``regrid``). Far fr
 the panel is a 1-D column (same layers) under the unconcentrated sunlight.
 
 Time stepping is the Douglas alternating-direction implicit scheme for backward Euler: per
-step one tridiagonal solve along each axis (laterally a product with the cached dense inverse
-for all lines at once, in depth the Thomas algorithm per column), unconditionally stable; its
-fixed point is the exact discrete steady state.
+step one tridiagonal solve along each axis (the Thomas algorithm, all lines of an axis
+sharing its elimination coefficients, in one compiled loop nest: ``kernels.douglas_step``),
+unconditionally stable; its fixed point is the exact discrete steady state.
 Losses at the surface: convection h (T - T_a) and radiation eps sigma (T^4 - T_a^4), the
 linear part implicit, the rest of the radiation explicit; at the back, convection through the
 half bottom layer. Lateral patch sides are adiabatic (the far field has no lateral gradient).
@@ -39,6 +39,7 @@ Units: SI, temperatures in degC at the interface, K inside the radiation law.
 from dataclasses import dataclass
 import math
 
+from helio_drivers.sim.kernels import douglas_step, thomas_factors
 import numpy as np
 
 STEFAN_BOLTZMANN = 5.670374419e-8  # [W/(m^2 K^4)]
@@ -198,40 +199,6 @@ def _tridiagonal_operator(edges, diffusivity):
     return lower, diagonal, upper
 
 
-def _apply_tridiagonal(lower, diagonal, upper, values, axis=0):
-    """Multiply the operator (along `axis` of `values`) by `values`."""
-    shape = [1] * values.ndim
-    shape[axis] = -1
-    head = [slice(None)] * values.ndim
-    tail = list(head)
-    head[axis], tail[axis] = slice(1, None), slice(None, -1)
-    head, tail = tuple(head), tuple(tail)
-    result = diagonal.reshape(shape) * values
-    result[head] += lower[1:].reshape(shape) * values[tail]
-    result[tail] += upper[:-1].reshape(shape) * values[head]
-    return result
-
-
-def _shifted_inverse_increment(lower, diagonal, upper, dt):
-    """
-    Return inv(I - dt A) - I for a lateral axis operator A (n of about 100), as float32.
-
-    The patch's lateral operators and the world's step are fixed, so the inverse is computed
-    once per dt and a sweep is one matrix product over all lines (BLAS), faster than any
-    banded or Thomas solve of the same lines in numpy (LAPACK's gttrs with many right-hand
-    sides: 1.2 ms against 0.5 ms). The product is done in single precision on the
-    increment: u = b + (inv - I) b. The increment's columns sum to zero with the cell widths
-    as weights (the operator conserves heat), so single precision's rounding stays on the
-    change per step: a heat content error of ~1e-8 of the stored heat per step, against
-    1e-7 of every temperature with the plain inverse in single precision; the products
-    cost half of double precision's.
-    """
-    n = len(diagonal)
-    shifted = np.eye(n) - dt * (np.diag(diagonal) + np.diag(upper[:-1], 1)
-                                + np.diag(lower[1:], -1))
-    return (np.linalg.inv(shifted) - np.eye(n)).astype(np.float32)
-
-
 def bilinear_weights(centres, coordinates):
     """
     Linear interpolation weights on a non-uniform axis of cell centres.
@@ -315,8 +282,8 @@ class WoodPanel:
         # (world y) and into the depth the wood conducts with `conductivity`.
         self._ops_x = _tridiagonal_operator(self._lateral, self.wood.diffusivity_along_grain)
         self._ops_y = _tridiagonal_operator(self._lateral, a)
-        self._inverse_dt = None
-        self._increments = None
+        self._sweep_dt = None
+        self._sweeps = None
         self._depth_dt = None
         self._depth_elimination = None
         lower, diagonal, upper = _tridiagonal_operator(self.z_edges, a)
@@ -466,12 +433,6 @@ class WoodPanel:
         loss -= h * top
         return h, loss
 
-    def _apply_z(self, theta, h_top):
-        """Return Az theta, the depth operator with the surface loss h_top (per column)."""
-        result = _apply_tridiagonal(*self._ops_z, theta)
-        result[0] -= h_top * theta[0] / (self.wood.volumetric_heat_capacity * self.z_widths[0])
-        return result
-
     def _depth_coefficients(self, dt):
         """
         Return the bottom-up elimination of (I - dt Az) without the surface loss, per dt.
@@ -617,20 +578,22 @@ class WoodPanel:
         self.ledger.regrid += self.stored_energy() - before
         self.recentres += 1
 
-    def _lateral_increments(self, dt):
+    def _sweep_coefficients(self, dt):
         """
-        Return inv(I - dt Ax) - I transposed and inv(I - dt Ay) - I (float32), per dt.
+        Return the per-dt coefficients of ``kernels.douglas_step`` (kept while dt is).
 
-        With dt Ay as well, for the explicit parts of the step.
+        (dt Ay's and dt Az's bands, the Thomas factors of I - dt Ax and I - dt Ay, the
+        bottom-up elimination of I - dt Az without the surface loss, its top pivot.)
         """
-        if self._inverse_dt != dt:
-            lower, diagonal, upper = self._ops_y
-            self._increments = (
-                np.ascontiguousarray(_shifted_inverse_increment(*self._ops_x, dt).T),
-                _shifted_inverse_increment(*self._ops_y, dt),
-                (dt * lower, dt * diagonal, dt * upper))
-            self._inverse_dt = dt
-        return self._increments
+        if self._sweep_dt != dt:
+            above, factor, inverse_pivot, top = self._depth_coefficients(dt)
+            self._sweeps = (
+                tuple(np.ascontiguousarray(dt * band) for band in self._ops_y),
+                tuple(np.ascontiguousarray(dt * band) for band in self._ops_z),
+                thomas_factors(*self._ops_x, dt), thomas_factors(*self._ops_y, dt),
+                (above.copy(), factor.copy(), inverse_pivot.copy()), float(top))
+            self._sweep_dt = dt
+        return self._sweeps
 
     def step(self, dt, irradiance, far_irradiance=0.0):
         """
@@ -638,7 +601,9 @@ class WoodPanel:
 
         `far_irradiance` is the (unconcentrated) irradiance far from the patch [W/m^2].
         Douglas ADI: (I - dt Ax) u1 = u + dt (Ay + Az) u + dt f; (I - dt Ay) u2 = u1 - dt Ay u;
-        (I - dt Az) u3 = u2 - dt Az u; f the explicit surface source.
+        (I - dt Az) u3 = u2 - dt Az u; f the explicit surface source. The sweeps are one
+        compiled loop nest (``kernels.douglas_step``: the Thomas algorithm along each axis
+        in double precision, the explicit terms recomputed where they are used).
         """
         if not dt > 0.0:
             raise ValueError(f'dt must be > 0 s, got {dt}')
@@ -651,30 +616,21 @@ class WoodPanel:
         rho_c = self.wood.volumetric_heat_capacity
         dz0 = self.z_widths[0]
         absorbed = self._absorptance * irradiance
-        theta = self.theta
+        theta = self._flat('theta').reshape(self.theta.shape)
         h_top, remainder = self._loss_linearisation(theta[0])
-        source_top = (absorbed - remainder) / (rho_c * dz0)
-
-        increment_x_t, increment_y, dt_ops_y = self._lateral_increments(dt)
-        dt_ay = _apply_tridiagonal(*dt_ops_y, theta, axis=1)          # dt Ay u
-        dt_az = self._apply_z(theta, h_top)
-        dt_az *= dt                                                   # dt Az u
-        rhs = theta + dt_ay
-        rhs += dt_az
-        rhs[0] += dt * source_top
-        # x sweep first, then y: u + (inv - I) u along each axis, the increment in float32
-        u1 = rhs + np.matmul(rhs.astype(np.float32), increment_x_t)
-        u1 -= dt_ay
-        u2 = u1 + np.matmul(increment_y, u1.astype(np.float32))
-        u2 -= dt_az
-        u3 = self._solve_z(dt, u2, h_top)
+        dt_source = (absorbed - remainder) * (dt / (rho_c * dz0))
+        top_loss = h_top * (dt / (rho_c * dz0))
+        dt_ay, dt_az, x_factors, y_factors, z_elimination, top = self._sweep_coefficients(dt)
+        u3 = np.empty_like(theta)
+        highest = douglas_step(theta, u3, dt_source, top_loss, dt_ay, dt_az, x_factors,
+                               y_factors, z_elimination, top_loss + top)
 
         areas = self.cell_areas
         self.ledger.absorbed += dt * float(np.sum(absorbed * areas))
         self.ledger.lost_top += dt * float(np.sum((h_top * u3[0] + remainder) * areas))
         self.ledger.lost_back += dt * float(np.sum(self._h_back * u3[-1] * areas))
         self.theta = u3
-        evaporated, pyrolysed = self._heat_sinks(dt)
+        evaporated, pyrolysed = self._heat_sinks(dt, highest)
         self.ledger.evaporated += evaporated
         self.ledger.pyrolysed += pyrolysed
         self._last_absorbed = absorbed
@@ -692,13 +648,13 @@ class WoodPanel:
             setattr(self, name, field)
         return field.reshape(-1)
 
-    def _heat_sinks(self, dt):
+    def _heat_sinks(self, dt, highest=math.inf):
         """
         Evaporate water, then pyrolyse wood, in the cells hot enough (in place).
 
         One comparison over the patch finds the cells above the lower of the two
-        temperatures; both sinks then work on those few cells only. Returns the heat taken
-        by each [J].
+        temperatures (none when the patch's `highest` theta is below it); both sinks then
+        work on those few cells only. Returns the heat taken by each [J].
         """
         w = self.wood
         boiling = w.boiling_temperature - w.ambient
@@ -709,6 +665,8 @@ class WoodPanel:
             return 0.0, 0.0
         lowest = min(boiling if evaporating else math.inf,
                      threshold if pyrolysing else math.inf)
+        if not highest > lowest:
+            return 0.0, 0.0
         theta = self._flat('theta')
         candidates = np.flatnonzero(theta > lowest)
         evaporated = pyrolysed = 0.0

@@ -1,0 +1,173 @@
+"""
+Compiled loops of the simulated world (issue 16): the heat step's sweeps and the cameras'.
+
+numba compiles these once per machine (``cache=True``: the machine code is kept beside this
+file, or in numba's user cache when that is not writable) and runs them on the calling
+thread, no thread pool (as every helio process: ``single_threaded_numerics``). Each is a
+loop the numpy form of which made several passes over the whole array with a temporary
+per pass; compiled, one loop nest reads and writes each cell once or twice, in the cache.
+
+Why numba (README, "Dependencies"): the world's hot loops are recurrences (the Thomas
+algorithm along each axis) and fused per-pixel arithmetic that numpy cannot express without
+temporaries; numba compiles the plain loops from Python with no C build step in colcon, and
+the pip wheel (with llvmlite) installs on every machine the project supports.
+"""
+
+import numba
+import numpy as np
+
+
+def thomas_factors(lower, diagonal, upper, dt):
+    """
+    Return the top-down elimination of (I - dt A) for a tridiagonal A (1-D arrays).
+
+    (sub, super_eliminated, inverse_pivot): row i of I - dt A is
+    sub[i] x[i-1] + (1 - dt diagonal[i]) x[i] - dt upper[i] x[i+1]; the Thomas algorithm's
+    forward sweep is d'[i] = (r[i] - sub[i] d'[i-1]) inverse_pivot[i], its back sweep
+    x[i] = d'[i] - super_eliminated[i] x[i+1]. The coefficients are shared by every line
+    of the patch (the operator is the same on each), so they are worked out once per dt.
+    """
+    n = len(diagonal)
+    sub = -dt * np.asarray(lower, dtype=float)
+    main = 1.0 - dt * np.asarray(diagonal, dtype=float)
+    sup = -dt * np.asarray(upper, dtype=float)
+    eliminated = np.zeros(n)
+    inverse_pivot = np.zeros(n)
+    inverse_pivot[0] = 1.0 / main[0]
+    eliminated[0] = sup[0] * inverse_pivot[0]
+    for i in range(1, n):
+        inverse_pivot[i] = 1.0 / (main[i] - sub[i] * eliminated[i - 1])
+        eliminated[i] = sup[i] * inverse_pivot[i]
+    eliminated[-1] = 0.0
+    return sub, eliminated, inverse_pivot
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def _explicit_terms(theta, dt_ay_ops, dt_az_ops, top_loss, dt_ay, dt_az):
+    """
+    Fill dt_ay = dt Ay theta and dt_az = dt Az theta (Az with the surface loss), in place.
+
+    Adiabatic lateral ends; every boundary is its own loop, so the inner loops run along
+    whole contiguous rows with scalar coefficients.
+    """
+    nz, ny, nx = theta.shape
+    ay_lower, ay_diagonal, ay_upper = dt_ay_ops
+    az_lower, az_diagonal, az_upper = dt_az_ops
+    for k in range(nz):
+        for j in range(ny):
+            d = ay_diagonal[j]
+            for i in range(nx):
+                dt_ay[k, j, i] = d * theta[k, j, i]
+            if j > 0:
+                lo = ay_lower[j]
+                for i in range(nx):
+                    dt_ay[k, j, i] += lo * theta[k, j - 1, i]
+            if j < ny - 1:
+                up = ay_upper[j]
+                for i in range(nx):
+                    dt_ay[k, j, i] += up * theta[k, j + 1, i]
+            d = az_diagonal[k]
+            for i in range(nx):
+                dt_az[k, j, i] = d * theta[k, j, i]
+            if k > 0:
+                lo = az_lower[k]
+                for i in range(nx):
+                    dt_az[k, j, i] += lo * theta[k - 1, j, i]
+            else:
+                for i in range(nx):
+                    dt_az[0, j, i] -= top_loss[j, i] * theta[0, j, i]
+            if k < nz - 1:
+                up = az_upper[k]
+                for i in range(nx):
+                    dt_az[k, j, i] += up * theta[k + 1, j, i]
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def douglas_step(theta, out, dt_source, top_loss, dt_ay_ops, dt_az_ops, x_factors,
+                 y_factors, z_elimination, top_pivot):
+    """
+    One Douglas ADI step for backward Euler of the patch (wood.py), into `out`; return max.
+
+    theta (z, y, x) the rises now, out the same shape (overwritten with the new ones),
+    dt_source (y, x) dt times the surface source of the top layer, top_loss (y, x) dt h_top
+    / (rho c dz0), dt_ay_ops and dt_az_ops the (lower, diagonal, upper) of dt Ay and dt Az
+    (Az without the surface loss), x_factors and y_factors the ``thomas_factors`` of
+    (I - dt Ax) and (I - dt Ay), z_elimination the bottom-up (above, factor,
+    inverse_pivot) of (I - dt Az) without the loss, and top_pivot (y, x) the top row's
+    pivot with the loss. The scheme (Douglas and Gunn):
+    (I - dt Ax) u1 = u + dt (Ay + Az) u + dt f; (I - dt Ay) u2 = u1 - dt Ay u;
+    (I - dt Az) u3 = u2 - dt Az u; every solve the Thomas algorithm in double precision.
+    """
+    nz, ny, nx = theta.shape
+    x_sub, x_eliminated, x_inverse = x_factors
+    y_sub, y_eliminated, y_inverse = y_factors
+    above, factor, z_inverse = z_elimination
+    dt_ay = np.empty_like(theta)
+    dt_az = np.empty_like(theta)
+    _explicit_terms(theta, dt_ay_ops, dt_az_ops, top_loss, dt_ay, dt_az)
+    # right-hand side of the x sweep: u + dt Ay u + dt Az u + dt f
+    for k in range(nz):
+        for j in range(ny):
+            for i in range(nx):
+                out[k, j, i] = theta[k, j, i] + dt_ay[k, j, i] + dt_az[k, j, i]
+    for j in range(ny):
+        for i in range(nx):
+            out[0, j, i] += dt_source[j, i]
+    # x sweep (lines along the contiguous axis: the lines of a layer advance together)
+    for k in range(nz):
+        for j in range(ny):
+            out[k, j, 0] *= x_inverse[0]
+        for i in range(1, nx):
+            sub, inverse = x_sub[i], x_inverse[i]
+            for j in range(ny):
+                out[k, j, i] = (out[k, j, i] - sub * out[k, j, i - 1]) * inverse
+        for r in range(nx - 1):
+            i = nx - 2 - r
+            eliminated = x_eliminated[i]
+            for j in range(ny):
+                out[k, j, i] -= eliminated * out[k, j, i + 1]
+    # y sweep of u1 - dt Ay u
+    for k in range(nz):
+        inverse = y_inverse[0]
+        for i in range(nx):
+            out[k, 0, i] = (out[k, 0, i] - dt_ay[k, 0, i]) * inverse
+        for j in range(1, ny):
+            sub, inverse = y_sub[j], y_inverse[j]
+            for i in range(nx):
+                out[k, j, i] = (out[k, j, i] - dt_ay[k, j, i] - sub * out[k, j - 1, i]) * inverse
+        for r in range(ny - 1):
+            j = ny - 2 - r
+            eliminated = y_eliminated[j]
+            for i in range(nx):
+                out[k, j, i] -= eliminated * out[k, j + 1, i]
+    # z sweep of u2 - dt Az u, eliminated from the bottom layer up (only the top row's
+    # pivot differs from column to column: the surface loss)
+    for k in range(nz):
+        for j in range(ny):
+            for i in range(nx):
+                out[k, j, i] -= dt_az[k, j, i]
+    if nz == 1:
+        for j in range(ny):
+            for i in range(nx):
+                out[0, j, i] /= top_pivot[j, i]
+        return out.max()
+    inverse = z_inverse[nz - 1]
+    for j in range(ny):
+        for i in range(nx):
+            out[nz - 1, j, i] *= inverse
+    for r in range(nz - 2):
+        k = nz - 2 - r
+        a, inverse = above[k], z_inverse[k]
+        for j in range(ny):
+            for i in range(nx):
+                out[k, j, i] = (out[k, j, i] - a * out[k + 1, j, i]) * inverse
+    a = above[0]
+    for j in range(ny):
+        for i in range(nx):
+            out[0, j, i] = (out[0, j, i] - a * out[1, j, i]) / top_pivot[j, i]
+    for k in range(1, nz):
+        f = factor[k]
+        for j in range(ny):
+            for i in range(nx):
+                out[k, j, i] -= f * out[k - 1, j, i]
+    return out.max()
