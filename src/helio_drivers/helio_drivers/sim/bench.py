@@ -29,7 +29,8 @@ commands the next of two dots as soon as the last move ended; CPU is the node pr
 simulated second.
 
 Per-part costs (``*_ms_median``, CPU time): ``sim_heat_step``, ``sim_flux_trace``
-(re-trace after a move), ``sim_flux_bin``, ``sim_thermal_frame``, ``sim_rgb_frame``
+(re-trace after the sun turned), ``sim_flux_carry`` (the moving lens's rays carried along
+after a move without turning), ``sim_flux_bin``, ``sim_thermal_frame``, ``sim_rgb_frame``
 (unchanged scene), ``sim_rgb_frame_heating`` (the char changing between frames),
 ``sim_rgb_frame_moving`` (a new pose every frame), ``sim_world_step``.
 
@@ -400,8 +401,15 @@ def bench_costs(rig, repeats=30):
                                     world, (DOT[0], DOT[1] + 1e-3 * k), D_LP)).T_robot_lens)
              for k in range(repeats)]
     fields = []
+    # the sun turned 1 mrad more each time: a re-trace (a lens that only moved is carried)
+    suns = [s0 + np.array([1e-3 * (k + 1), 0.0, 0.0]) for k in range(repeats)]
     figures['sim_flux_trace_ms_median'] = _cpu_ms(
-        lambda: fields.append(world.flux.field(poses[len(fields)], s0)), repeats)
+        lambda: fields.append(world.flux.field(poses[len(fields)], suns[len(fields)])),
+        repeats)
+    carried = []
+    figures['sim_flux_carry_ms_median'] = _cpu_ms(
+        lambda: carried.append(world.flux.field(poses[len(carried)], suns[-1], moving=True)),
+        repeats)
     figures['sim_flux_bin_ms_median'] = _cpu_ms(
         lambda: irradiance_on_cells(fields[-1], world.panel.x_edges, world.panel.y_edges,
                                     900.0), repeats)

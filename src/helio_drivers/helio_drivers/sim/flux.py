@@ -14,7 +14,8 @@ the wood patch and divided by the cell areas: irradiance [W/m^2] on the panel.
 
 The light that misses the lens lands on the panel directly: DNI cos(incidence) everywhere
 except in the lens shadow (the aperture projected along the sun ray). The map is kept per
-unit DNI and re-traced only when the lens or the sun moved noticeably; a cloud just scales it.
+unit DNI and re-traced only when the lens or the sun turned noticeably (a lens that only moved
+carries its traced rays along, exactly); a cloud just scales it.
 """
 
 from dataclasses import dataclass, replace
@@ -100,8 +101,8 @@ class LensFlux:
         `beam_spread` [rad] is the standard deviation of a Gaussian angular error added to
         every ray (per axis): the facet slope and profile errors of a real moulded lens,
         convolved with the sun's disk as solar ray tracers do. The map is re-traced when
-        the lens moved more than `move_tolerance` [m] or the lens axis or sun ray turned
-        more than `angle_tolerance` [rad].
+        the lens axis or sun ray turned more than `angle_tolerance` [rad] and carried along
+        with the lens (exactly) when it moved more than `move_tolerance` [m].
         """
         self.lens = lens or LensParameters()
         if rays < 100:
@@ -130,55 +131,112 @@ class LensFlux:
         self.angle_tolerance = angle_tolerance
         self._field = None
         self._key = None
+        self._traced = None
         self._field_is_sparse = False
-        self.traces = 0
+        self.traces = 0     # traces done
+        self.fields = 0     # fields made (traced, or carried along with the lens)
 
     def field(self, T_world_lens, sun_ray_world, moving=False):
         """
-        Return the FluxField for a lens pose and sun ray (world), re-traced only if moved.
+        Return the FluxField for a lens pose and sun ray (world), re-traced only if turned.
 
-        With `moving` a re-trace uses the moving lens's fewer rays; a field traced so is
-        traced again in full as soon as it is asked for without `moving`.
+        A lens that moved without turning (its axis and the sun ray within
+        `angle_tolerance` of the traced ones: the rig keeps the lens's orientation while
+        the arm moves it) gets the traced rays carried along exactly (``_TracedRays``);
+        it is re-traced when either turned more. With `moving` the field holds the moving
+        lens's fewer rays (every ``moving_stride``-th sample); a field so made is made in
+        full again as soon as it is asked for without `moving`.
         """
         T = np.asarray(T_world_lens, dtype=float)
         s0 = np.asarray(sun_ray_world, dtype=float)
         s0 = s0 / np.linalg.norm(s0)
-        if self._key is not None:
-            T_old, s_old = self._key
-            moved = np.linalg.norm(T[:3, 3] - T_old[:3, 3])
-            turned = math.acos(np.clip(T[:3, 2] @ T_old[:3, 2], -1.0, 1.0))
-            sun_turned = math.acos(np.clip(s0 @ s_old, -1.0, 1.0))
-            if (moved <= self.move_tolerance and turned <= self.angle_tolerance
-                    and sun_turned <= self.angle_tolerance
-                    and (moving or not self._field_is_sparse)):
-                return self._field
         sparse = moving and self.moving_stride > 1
-        self._field = self._trace(T, s0, self._moving_samples if sparse else self._samples)
+        traced = self._traced
+        if traced is not None:
+            T_traced, s_traced = traced.key
+            turned = math.acos(np.clip(T[:3, 2] @ T_traced[:3, 2], -1.0, 1.0))
+            sun_turned = math.acos(np.clip(s0 @ s_traced, -1.0, 1.0))
+            if turned <= self.angle_tolerance and sun_turned <= self.angle_tolerance:
+                moved = np.linalg.norm(T[:3, 3] - self._key[0][:3, 3])
+                if moved <= self.move_tolerance and (moving or not self._field_is_sparse):
+                    return self._field
+                if sparse or not traced.sparse:
+                    self._field = traced.carried(T[:3, 3], sparse)
+                    self._field_is_sparse = sparse
+                    self._key = (T.copy(), s0.copy())
+                    self.fields += 1
+                    return self._field
+        self._traced = self._trace(T, s0, self._moving_samples if sparse else self._samples,
+                                   sparse)
+        self._field = self._traced.carried(T[:3, 3], sparse)
         self._field_is_sparse = sparse
         self._key = (T.copy(), s0.copy())
         self.traces += 1
+        self.fields += 1
         return self._field
 
     @property
     def field_is_sparse(self):
-        """Tell whether the present field was traced with the moving lens's fewer rays."""
+        """Tell whether the present field holds the moving lens's fewer rays."""
         return self._field_is_sparse
 
-    def _trace(self, T_world_lens, s0, samples):
-        """Trace `samples` in every band at once; return the FluxField (per unit DNI)."""
+    def _trace(self, T_world_lens, s0, samples, sparse):
+        """Trace `samples` in every band at once; return their _TracedRays (per unit DNI)."""
         result = trace_bands(self.lens, samples, self._indices, s0, T_world_lens,
                              irradiance=1.0)
-        hit = result.hit
         power = self._weights[:, None] * result.power
-        # the rays that reach the panel, band after band (as B separate traces gave them)
         incident = result.incident_power
-        lost = incident * self.lens.transmission - float(power[hit].sum())
-        lens_axis = T_world_lens[:3, 2]
-        return FluxField(points=result.points[hit][:, :2], power=power[hit],
-                         direct=max(0.0, -float(s0[2])), lens_centre=T_world_lens[:3, 3].copy(),
-                         lens_axis=lens_axis.copy(), aperture_radius=self.lens.aperture_radius,
-                         sun_ray=s0.copy(),
-                         tir_fraction=lost / incident if incident > 0.0 else 0.0)
+        # every stride-th sample of a full trace: the rays a sparse trace would give
+        stride = 1 if sparse else self.moving_stride
+        subset = np.zeros(result.hit.shape[1], bool)
+        subset[::stride] = True
+        return _TracedRays(
+            key=(T_world_lens.copy(), s0.copy()), sparse=sparse, hit=result.hit,
+            points=result.points[..., :2], directions=result.directions, power=power, subset=subset, stride=stride, incident=incident,
+            transmission=self.lens.transmission, direct=max(0.0, -float(s0[2])),
+            lens_axis=T_world_lens[:3, 2].copy(), aperture_radius=self.lens.aperture_radius,
+            sun_ray=s0.copy())
+
+
+class _TracedRays:
+    """
+    The rays of one trace leaving the lens, to carry along with a lens that only moves.
+
+    A ray leaving the lens is a line; the lens moved by t without turning moves every
+    line by t, so the ray that met the panel (z = 0) at p with direction d now meets it at
+    p + t_xy - t_z d_xy / d_z: the trace at the new pose, exactly (the power and the rays
+    lost to total internal reflection do not change). Kept: the hit points and slopes
+    d_xy / d_z of the rays that reach the panel, all of them and the moving lens's subset.
+    """
+
+    def __init__(self, key, sparse, hit, points, directions, power, subset, stride, incident,
+                 transmission, direct, lens_axis, aperture_radius, sun_ray):
+        """Keep the panel-reaching rays of a trace at lens pose `key` (see the class)."""
+        self.key = key
+        self.sparse = sparse
+        self._origin = key[0][:3, 3].copy()
+        self._common = {'direct': direct, 'lens_axis': lens_axis,
+                        'aperture_radius': aperture_radius, 'sun_ray': sun_ray}
+        self._sets = {}
+        for name, chosen in (('all', hit), ('moving', hit & subset[None, :])):
+            # the rays that reach the panel, band after band (as B separate traces gave them)
+            scale = 1.0 if name == 'all' else float(stride)
+            chosen_power = power[chosen] * scale
+            lost = incident * transmission - float(chosen_power.sum())
+            leaving = directions[chosen]
+            self._sets[name] = (np.ascontiguousarray(points[chosen]),
+                                leaving[:, :2] / leaving[:, 2:3], chosen_power,
+                                lost / incident if incident > 0.0 else 0.0)
+
+    def carried(self, lens_centre, sparse):
+        """Return the FluxField of these rays with the lens moved to `lens_centre` (world)."""
+        points, slopes, power, tir_fraction = self._sets['moving' if sparse else 'all']
+        shift = np.asarray(lens_centre, dtype=float) - self._origin
+        if np.any(shift):
+            points = points + shift[:2] - shift[2] * slopes
+        return FluxField(points=points, power=power, lens_centre=np.array(lens_centre,
+                                                                          dtype=float),
+                         tir_fraction=tir_fraction, **self._common)
 
 
 def _every(samples, stride):

@@ -285,7 +285,7 @@ class SimWorld:
         self._field = self.flux.field(T_world_lens, self._sun_ray, moving=moving)
         centroid = self._field.centroid()
         self.panel.follow(centroid)
-        key = (self.flux.traces, tuple(self.panel.centre))
+        key = (self.flux.fields, tuple(self.panel.centre))
         if key != self._irradiance_key:
             self._unit_irradiance = irradiance_on_cells(self._field, self.panel.x_edges,
                                                         self.panel.y_edges, 1.0)
@@ -323,12 +323,12 @@ class SimWorld:
         """Return the RGB image (H, W, 3) uint8 at the camera's present pose."""
         T_world_rgb, _ = self.camera_poses()
         field = self._field
-        if self.flux.traces != self._light_key:  # the lit window changes only with a new trace
+        if self.flux.fields != self._light_key:  # the lit window changes only with a new field
             window = self._light_window(field)
             self._light = None if window is None else light_window(
                 field, self.panel.raster_shape, self.panel.raster_origin,
                 self.panel.grid.fine_cell, window)
-            self._light_key = self.flux.traces
+            self._light_key = self.flux.fields
         self.rgb.update_char(self.panel.char, self.panel.take_char_changes())
         attenuation = self._dni / max(self.sun.dni, 1e-9)   # clouds dim the direct sun only
         return self.rgb.render(T_world_rgb, self._light, attenuation, self._rng)
