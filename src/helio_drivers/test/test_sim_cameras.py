@@ -254,6 +254,30 @@ def test_linearised_read_out_has_the_exact_read_outs_mean_and_noise_per_level():
     assert np.abs(fast[0] - fast[1]).mean() > 0.5
 
 
+def test_compiled_table_read_out_equals_the_numpy_passes_it_replaced():
+    # the tables indexed by light x a per-pixel scale (the vignetting), written as numpy
+    # passes: product, clip, + 0.5, cast, two look-ups; light from below 0 to far above
+    settings = RgbSettings(width=96, height=64)
+    camera = RgbCamera((-0.04, 0.06, -0.04, 0.06), 2e-4, settings)
+    read_out = NoisyReadOut(camera._webcam, (settings.height, settings.width, 3), seed=3)
+    rng = np.random.default_rng(5)
+    light = rng.uniform(-0.1, 1.5, (settings.height, settings.width, 3)).astype(np.float32)
+    light[0, 0] = np.nan
+    scale = (rng.uniform(0.8, 1.0, light.shape) * read_out.index_scale()).astype(np.float32)
+    for per_pixel in (scale, None):
+        index = (np.multiply(light, per_pixel, dtype=np.float32) if per_pixel is not None
+                 else light * np.float32(read_out.index_scale()))
+        index = np.nan_to_num(index, nan=0.0)
+        np.clip(index, 0.0, float(read_out._last), out=index)
+        index = (index + np.float32(0.5)).astype(np.intp)
+        level, gain = read_out.prepare(light, per_pixel)
+        assert np.array_equal(level, read_out._level[index])
+        assert np.array_equal(gain, read_out._gain[index])
+    part = light[5:30, 7:50]    # a part of a frame (not contiguous)
+    level, _ = read_out.prepare(part, scale[5:30, 7:50])
+    assert np.array_equal(level, read_out.prepare(part.copy(), scale[5:30, 7:50].copy())[0])
+
+
 def test_ground_light_by_homography_equals_casting_every_pixel_ray():
     camera = RgbCamera((-0.04, 0.06, -0.04, 0.06), 2e-4, noise_free())
     texture = camera._albedo

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import math
 
 import cv2
+from helio_drivers.sim.kernels import tone_table_read_out
 from helio_optics.geometry import PinholeCamera
 from helio_optics.ground_render import (decode_srgb8, GroundRenderer, GroundTexture,
                                         jpeg_round_trip, linear_to_srgb,
@@ -210,6 +211,7 @@ class NoisyReadOut:
         self._level = (curve + bend * sigma * sigma).astype(np.float32)
         self._gain = (slope * sigma).astype(np.float32)
         self._last = len(curve) - 1
+        self._no_scale = np.zeros((0, 0, 0), np.float32)
         self.shape = tuple(shape)
         # flat frames a few rows longer than the image: a crop at any offset is contiguous
         self._size = int(np.prod(self.shape))
@@ -232,14 +234,17 @@ class NoisyReadOut:
         still needs, such as the vignetting: one pass for both), or None.
         """
         light = np.asarray(light, dtype=np.float32)
+        cube = light.reshape(light.shape[:2] + (-1,)) if light.ndim >= 2 else \
+            light.reshape(1, -1, 1)
         if scale is None:
-            index = light * np.float32(self.index_scale())
+            scale = self._no_scale
         else:
-            index = np.multiply(light, scale, dtype=np.float32)
-        np.clip(index, 0.0, float(self._last), out=index)
-        index += np.float32(0.5)
-        index = index.astype(np.intp)
-        return np.take(self._level, index), np.take(self._gain, index)
+            scale = np.asarray(scale, dtype=np.float32).reshape(cube.shape)
+        level = np.empty(cube.shape, np.float32)
+        gain = np.empty(cube.shape, np.float32)
+        tone_table_read_out(cube, scale, np.float32(self.index_scale()), self._last,
+                            self._level, self._gain, level, gain)
+        return level.reshape(light.shape), gain.reshape(light.shape)
 
     def expose(self, prepared, rng=None):
         """Return the 8-bit frame of (level, gain): noise from a random offset in the bank."""

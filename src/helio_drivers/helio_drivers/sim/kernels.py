@@ -171,3 +171,35 @@ def douglas_step(theta, out, dt_source, top_loss, dt_ay_ops, dt_az_ops, x_factor
             for i in range(nx):
                 out[k, j, i] -= f * out[k - 1, j, i]
     return out.max()
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def tone_table_read_out(light, scale, uniform_scale, last, level_table, gain_table, level,
+                        gain):
+    """
+    Fill `level` and `gain` (h, w, c) float32 from tables indexed by light (NoisyReadOut).
+
+    Per element, in single precision as numpy's passes did it: index = light x scale (or x
+    `uniform_scale` when `scale` is empty), clipped to [0, last], + 0.5, truncated; then
+    level = level_table[index], gain = gain_table[index]. One pass instead of six (the
+    product, the clip, the rounding, the cast and two look-ups, each a whole frame).
+    """
+    height, width, channels = light.shape
+    uniform = scale.shape[0] == 0
+    top = np.float32(last)
+    half = np.float32(0.5)
+    zero = np.float32(0.0)
+    for r in range(height):
+        for c in range(width):
+            for k in range(channels):
+                if uniform:
+                    value = light[r, c, k] * uniform_scale
+                else:
+                    value = light[r, c, k] * scale[r, c, k]
+                if not value > zero:     # NaN too
+                    value = zero
+                elif value > top:
+                    value = top
+                index = int(value + half)
+                level[r, c, k] = level_table[index]
+                gain[r, c, k] = gain_table[index]
