@@ -254,9 +254,10 @@ def test_linearised_read_out_has_the_exact_read_outs_mean_and_noise_per_level():
     assert np.abs(fast[0] - fast[1]).mean() > 0.5
 
 
-def test_compiled_table_read_out_equals_the_numpy_passes_it_replaced():
+def test_compiled_table_read_out_equals_the_numpy_and_opencv_passes_it_replaced():
     # the tables indexed by light x a per-pixel scale (the vignetting), written as numpy
-    # passes: product, clip, + 0.5, cast, two look-ups; light from below 0 to far above
+    # passes: product, clip, + 0.5, cast; the frame as OpenCV's multiply and add of
+    # level[index] and gain[index] x noise; light from below 0 to far above full scale
     settings = RgbSettings(width=96, height=64)
     camera = RgbCamera((-0.04, 0.06, -0.04, 0.06), 2e-4, settings)
     read_out = NoisyReadOut(camera._webcam, (settings.height, settings.width, 3), seed=3)
@@ -270,12 +271,19 @@ def test_compiled_table_read_out_equals_the_numpy_passes_it_replaced():
         index = np.nan_to_num(index, nan=0.0)
         np.clip(index, 0.0, float(read_out._last), out=index)
         index = (index + np.float32(0.5)).astype(np.intp)
-        level, gain = read_out.prepare(light, per_pixel)
-        assert np.array_equal(level, read_out._level[index])
-        assert np.array_equal(gain, read_out._gain[index])
+        prepared = read_out.prepare(light, per_pixel)
+        assert np.array_equal(prepared[0], index)
+        # the same noise offset drawn for both (a generator of the same seed)
+        frame = read_out.expose(prepared, np.random.default_rng(9))
+        k, offset = (int(v) for v in np.random.default_rng(9).integers(
+            0, (read_out.FRAMES, read_out._slack + 1)))
+        noise = read_out._bank[k, offset:offset + light.size].reshape(light.shape)
+        product = cv2.multiply(noise, read_out._gain[index], dtype=cv2.CV_32F)
+        assert np.array_equal(frame, cv2.add(read_out._level[index], product,
+                                             dtype=cv2.CV_8U))
     part = light[5:30, 7:50]    # a part of a frame (not contiguous)
-    level, _ = read_out.prepare(part, scale[5:30, 7:50])
-    assert np.array_equal(level, read_out.prepare(part.copy(), scale[5:30, 7:50].copy())[0])
+    index, _ = read_out.prepare(part, scale[5:30, 7:50])
+    assert np.array_equal(index, read_out.prepare(part.copy(), scale[5:30, 7:50].copy())[0])
 
 
 def test_ground_light_by_homography_equals_casting_every_pixel_ray():

@@ -174,15 +174,14 @@ def douglas_step(theta, out, dt_source, top_loss, dt_ay_ops, dt_az_ops, x_factor
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
-def tone_table_read_out(light, scale, uniform_scale, last, level_table, gain_table, level,
-                        gain):
+def tone_table_index(light, scale, uniform_scale, last, index):
     """
-    Fill `level` and `gain` (h, w, c) float32 from tables indexed by light (NoisyReadOut).
+    Fill `index` (h, w, c) uint16: the NoisyReadOut tables' index of each element's light.
 
-    Per element, in single precision as numpy's passes did it: index = light x scale (or x
-    `uniform_scale` when `scale` is empty), clipped to [0, last], + 0.5, truncated; then
-    level = level_table[index], gain = gain_table[index]. One pass instead of six (the
-    product, the clip, the rounding, the cast and two look-ups, each a whole frame).
+    Per element, in single precision as numpy's passes did it: light x scale (or x
+    `uniform_scale` when `scale` is empty), clipped to [0, last] (NaN to 0), + 0.5,
+    truncated. One pass writing 2 bytes per element instead of six passes writing the
+    level and gain (8 bytes): the frame is bound by memory traffic, not arithmetic.
     """
     height, width, channels = light.shape
     uniform = scale.shape[0] == 0
@@ -200,6 +199,86 @@ def tone_table_read_out(light, scale, uniform_scale, last, level_table, gain_tab
                     value = zero
                 elif value > top:
                     value = top
-                index = int(value + half)
-                level[r, c, k] = level_table[index]
-                gain[r, c, k] = gain_table[index]
+                index[r, c, k] = np.uint16(value + half)
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def noisy_tone_read_out(index, level_table, gain_table, noise, out):
+    """
+    Fill `out` uint8: round(level[index] + gain[index] x noise), saturated to 0..255.
+
+    `index`, `noise` (int8) and `out` are flat arrays of one length; the arithmetic is
+    OpenCV's multiply-then-add of the same float32 values (rounding half to even, as
+    ``cvRound``), in one pass reading 3 bytes and writing 1 per element.
+    """
+    low, high = np.float32(0.0), np.float32(255.0)
+    for p in range(index.shape[0]):
+        i = index[p]
+        value = level_table[i] + gain_table[i] * np.float32(noise[p])
+        out[p] = np.uint8(np.rint(min(max(value, low), high)))
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def _first_at_or_above(sorted_values, value, right):
+    """Binary search: numpy's searchsorted of one value (side 'right' when `right`)."""
+    low, high = 0, len(sorted_values)
+    while low < high:
+        middle = (low + high) // 2
+        if sorted_values[middle] < value or (right and sorted_values[middle] == value):
+            low = middle + 1
+        else:
+            high = middle
+    return low
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def bilinear_weights_on_axis(centres, coordinates, index, weight):
+    """
+    Fill index (i0) and weight (of i0 + 1) of linear interpolation on a non-uniform axis.
+
+    What ``wood.bilinear_weights`` documents: i0 = clip(searchsorted(centres, x) - 1, 0,
+    n - 2), weight = clip((x - c[i0]) / (c[i0 + 1] - c[i0]), 0, 1); a NaN coordinate
+    sorts last (numpy's order) and keeps a NaN weight.
+    """
+    n = len(centres)
+    for p in range(len(coordinates)):
+        x = coordinates[p]
+        if x != x:
+            i = n - 2
+        else:
+            i = min(max(_first_at_or_above(centres, x, False) - 1, 0), n - 2)
+        index[p] = i
+        w = (x - centres[i]) / (centres[i + 1] - centres[i])
+        if w < 0.0:
+            w = 0.0
+        elif w > 1.0:
+            w = 1.0
+        weight[p] = w
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def bin_points(x, y, weights, x_edges, y_edges, out):
+    """
+    Add `weights` of points (x, y) to the cells (y, x) of increasing edges in `out`.
+
+    ``np.histogram2d(y, x, bins=(y_edges, x_edges), weights=weights)``'s rule: a cell holds
+    its low edge, the last cell its high edge too; points outside (or NaN) are left out.
+    A binary search per axis and point (numpy's searchsorted and bincount made a pass and
+    a temporary each).
+    """
+    nx, ny = len(x_edges) - 1, len(y_edges) - 1
+    for p in range(len(x)):
+        column = _cell_of(x_edges, nx, x[p])
+        row = _cell_of(y_edges, ny, y[p])
+        if column >= 0 and row >= 0:
+            out[row, column] += weights[p]
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def _cell_of(edges, cells, value):
+    """Return the cell of `value` (histogram rule, see ``bin_points``), -1 outside."""
+    if not (value >= edges[0] and value <= edges[cells]):
+        return -1
+    if value == edges[cells]:
+        return cells - 1
+    return _first_at_or_above(edges, value, True) - 1

@@ -39,7 +39,7 @@ Units: SI, temperatures in degC at the interface, K inside the radiation law.
 from dataclasses import dataclass
 import math
 
-from helio_drivers.sim.kernels import douglas_step, thomas_factors
+from helio_drivers.sim.kernels import bilinear_weights_on_axis, douglas_step, thomas_factors
 import numpy as np
 
 STEFAN_BOLTZMANN = 5.670374419e-8  # [W/(m^2 K^4)]
@@ -203,13 +203,15 @@ def bilinear_weights(centres, coordinates):
     """
     Linear interpolation weights on a non-uniform axis of cell centres.
 
-    Returns (index i0, weight of i0+1, inside mask); coordinates between the outer edge and
-    the outermost centre take the outermost value.
+    Returns (index i0 = clip(searchsorted(centres, x) - 1, 0, n - 2), weight of i0 + 1,
+    clipped to [0, 1]); coordinates between the outer edge and the outermost centre take
+    the outermost value. A compiled loop (``kernels.bilinear_weights_on_axis``).
     """
     coordinates = np.asarray(coordinates, dtype=float)
-    index = np.clip(np.searchsorted(centres, coordinates) - 1, 0, len(centres) - 2)
-    span = centres[index + 1] - centres[index]
-    weight = np.clip((coordinates - centres[index]) / span, 0.0, 1.0)
+    index = np.empty(coordinates.shape, np.intp)
+    weight = np.empty(coordinates.shape)
+    bilinear_weights_on_axis(np.ascontiguousarray(centres, dtype=float),
+                             coordinates.reshape(-1), index.reshape(-1), weight.reshape(-1))
     return index, weight
 
 
