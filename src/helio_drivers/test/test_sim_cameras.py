@@ -67,6 +67,21 @@ def test_thermal_frames_kept_between_steps_and_re_centres_equal_a_fresh_cast():
     assert np.array_equal(kept.temperatures(panel, moved), fresh)
 
 
+@pytest.mark.parametrize('sigma', [0.0, 0.2])
+def test_thermal_image_in_one_pass_equals_the_temperatures_encoded(sigma):
+    # the compiled read-out against temperatures() then celsius_to_centikelvin, the same
+    # noise drawn for both; a view half off the patch (far field) and above its cap
+    panel = heated_panel()
+    camera = ThermalCamera(ThermalSettings(noise_sigma=sigma))
+    for pose in (look_at([-0.03, 0.0, 0.09], [0.01, 0.005, 0.0], up=(1.0, 0.0, 0.0)),
+                 look_at([0.02, 0.05, 0.05], [0.06, 0.04, 0.0], up=(1.0, 0.0, 0.0))):
+        counts = camera.image(panel, pose, np.random.default_rng(8))
+        expected = celsius_to_centikelvin(camera.temperatures(panel, pose,
+                                                              np.random.default_rng(8)))
+        assert np.array_equal(counts, expected)
+    assert centikelvin_to_celsius(counts.min()) < 30.0
+
+
 def test_thermal_noise_differs_frame_to_frame():
     panel = WoodPanel(extent=(-0.04, 0.06, -0.04, 0.06))
     camera = ThermalCamera(ThermalSettings(noise_sigma=0.2))

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import math
 
 import cv2
-from helio_drivers.sim.kernels import noisy_tone_read_out, tone_table_index
+from helio_drivers.sim.kernels import noisy_tone_read_out, thermal_counts, tone_table_index
 from helio_optics.geometry import PinholeCamera
 from helio_optics.ground_render import (decode_srgb8, GroundRenderer, GroundTexture,
                                         jpeg_round_trip, linear_to_srgb,
@@ -112,10 +112,11 @@ class ThermalCamera:
         self._view_key = None      # (pose, panel, placement) of the kept view
         self._view = None          # (pixels seeing the panel, their surface sampler)
         self._noise = NoiseBank((self.camera.height, self.camera.width), seed)
+        self._no_noise = np.zeros((self.camera.height, self.camera.width))
 
     def temperatures(self, panel, T_world_camera, rng=None):
         """Return the read-out [degC] per pixel: the field at pixel centres, noise, cap."""
-        seen, sample = self._seen(panel, T_world_camera)
+        seen, sample, _ = self._seen(panel, T_world_camera)
         field = np.full(seen.shape, panel.wood.ambient)
         field[seen] = sample()
         if self.settings.noise_sigma > 0.0:
@@ -124,7 +125,7 @@ class ThermalCamera:
 
     def _seen(self, panel, T_world_camera):
         """
-        Return (mask of the pixels that see the panel, sampler of their surface points).
+        Return (pixels that see the panel, their surface sampler, each pixel's point or -1).
 
         Kept while the camera and the heat patch stand still (they do while a dot heats):
         a frame then costs the gather of the surface field, not the ray casts.
@@ -134,13 +135,30 @@ class ThermalCamera:
         if key != self._view_key:
             x, y = self._renderer.ground_points(T_world_camera)
             seen = np.isfinite(x)
-            self._view = (seen, panel.surface_sampler(x[seen], y[seen]))
+            position = np.full(seen.shape, -1, np.intp)
+            position[seen] = np.arange(np.count_nonzero(seen))
+            self._view = (seen, panel.surface_sampler(x[seen], y[seen]), position)
             self._view_key = key
         return self._view
 
     def image(self, panel, T_world_camera, rng=None):
-        """Return the 16UC1 centikelvin read-out (H, W) as uint16."""
-        return celsius_to_centikelvin(self.temperatures(panel, T_world_camera, rng))
+        """
+        Return the 16UC1 centikelvin read-out (H, W) as uint16.
+
+        What ``celsius_to_centikelvin(temperatures(...))`` gives, in one compiled pass
+        (``kernels.thermal_counts``).
+        """
+        _, sampler, position = self._seen(panel, T_world_camera)
+        surface, far = sampler.surface()
+        s = self.settings
+        noisy = s.noise_sigma > 0.0
+        noise = self._noise.draw(rng) if noisy else self._no_noise
+        out = np.empty(position.shape, np.uint16)
+        thermal_counts(position, sampler.corner, sampler.columns, sampler.wx, sampler.wy,
+                       sampler.inside, surface, far, float(panel.wood.ambient), noise,
+                       float(s.noise_sigma) if noisy else 0.0, float(s.floor), float(s.cap),
+                       out)
+        return out
 
 
 class NoiseBank:

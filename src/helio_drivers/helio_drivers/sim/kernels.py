@@ -13,6 +13,8 @@ temporaries; numba compiles the plain loops from Python with no C build step in 
 the pip wheel (with llvmlite) installs on every machine the project supports.
 """
 
+import math
+
 import numba
 import numpy as np
 
@@ -282,3 +284,90 @@ def _cell_of(edges, cells, value):
     if value == edges[cells]:
         return cells - 1
     return _first_at_or_above(edges, value, True) - 1
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def surface_loss(top, ambient_kelvin, convection, radiating, loss, slope):
+    """
+    Fill the surface loss [W/m^2] and its slope [W/(m^2 K)] at top-layer rises `top` [K].
+
+    loss = h (T - T_a) + eps sigma (T^4 - T_a^4), slope = h + 4 eps sigma T^3 (T in K,
+    at least 0), per element of the flat arrays (``WoodPanel._loss_and_slope``).
+    """
+    ambient4 = ambient_kelvin ** 4
+    for p in range(top.shape[0]):
+        t = max(top[p] + ambient_kelvin, 0.0)
+        squared = t * t
+        loss[p] = convection * top[p] + radiating * (squared * squared - ambient4)
+        slope[p] = 4.0 * radiating * (squared * t) + convection
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def heat_sinks(theta, moisture, unpyrolysed, volumes, dt, rho_c, boiling, latent_heat,
+               threshold, heat_per_wood, ambient_kelvin, preexponential, activation,
+               gas_constant):
+    """
+    Evaporate water, then pyrolyse wood, cell by cell (flat arrays, in place).
+
+    A cell above `boiling` [K rise] with water left turns its excess heat
+    rho_c (theta - boiling) into evaporation up to the water it holds (latent_heat [J/kg],
+    0: no evaporation); then a cell above `threshold` (T_p) turns its excess into
+    pyrolysis, up to the wood the first-order rate A exp(-E / (R T)) converts in dt
+    (heat_per_wood [J/m^3] per unit, 0: none). Neither cools a cell below its
+    temperature. Returns the heat each took [J] (``wood._take_heat``'s rule per cell).
+    """
+    evaporated = 0.0
+    pyrolysed = 0.0
+    evaporating = latent_heat > 0.0
+    pyrolysing = heat_per_wood > 0.0
+    for p in range(theta.shape[0]):
+        rise = theta[p]
+        if evaporating and rise > boiling and moisture[p] > 0.0:
+            used = min(rho_c * (rise - boiling), moisture[p] * latent_heat)
+            rise -= used / rho_c
+            theta[p] = rise
+            moisture[p] = max(moisture[p] - used / latent_heat, 0.0)
+            evaporated += used * volumes[p]
+        if pyrolysing and rise > threshold:
+            rate = preexponential * math.exp(-activation / (gas_constant
+                                                            * (rise + ambient_kelvin)))
+            convertible = unpyrolysed[p] * -math.expm1(-rate * dt)
+            used = min(rho_c * (rise - threshold), convertible * heat_per_wood)
+            theta[p] = rise - used / rho_c
+            unpyrolysed[p] = max(unpyrolysed[p] - used / heat_per_wood, 0.0)
+            pyrolysed += used * volumes[p]
+    return evaporated, pyrolysed
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def thermal_counts(seen_position, corner, columns, wx, wy, inside, surface, far, ambient,
+                   noise, sigma, floor, cap, out):
+    """
+    Fill `out` (H, W) uint16 centikelvin: the thermal read-out of the surface, in one pass.
+
+    Pixel (r, c) sees sampler point seen_position[r, c] (-1: no panel, ambient); a point
+    inside the patch is the bilinear mix of `surface` (flat rises) at `corner`, `corner` +
+    1, + `columns`, + `columns` + 1 with weights wx, wy, outside it the `far` rise. Then
+    + sigma noise[r, c], clipped to [floor, cap] degC, rint((T + 273.15) 100), clipped to
+    0..65535: what ``ThermalCamera.temperatures`` and ``celsius_to_centikelvin`` do in
+    their passes, element for element in the same double-precision arithmetic.
+    """
+    height, width = seen_position.shape
+    for r in range(height):
+        for c in range(width):
+            q = seen_position[r, c]
+            value = ambient
+            if q >= 0:
+                if inside[q]:
+                    k = corner[q]
+                    low_x, low_y = 1 - wx[q], 1 - wy[q]
+                    rise = (low_y * (low_x * surface[k] + wx[q] * surface[k + 1])
+                            + wy[q] * (low_x * surface[k + columns]
+                                       + wx[q] * surface[k + columns + 1]))
+                else:
+                    rise = far
+                value = ambient + rise
+            value = value + sigma * noise[r, c]
+            value = min(max(value, floor), cap)
+            counts = np.rint((value + 273.15) * 100.0)
+            out[r, c] = np.uint16(min(max(counts, 0.0), 65535.0))

@@ -39,7 +39,8 @@ Units: SI, temperatures in degC at the interface, K inside the radiation law.
 from dataclasses import dataclass
 import math
 
-from helio_drivers.sim.kernels import bilinear_weights_on_axis, douglas_step, thomas_factors
+from helio_drivers.sim.kernels import (bilinear_weights_on_axis, douglas_step, heat_sinks,
+                                       surface_loss, thomas_factors)
 import numpy as np
 
 STEFAN_BOLTZMANN = 5.670374419e-8  # [W/(m^2 K^4)]
@@ -414,16 +415,11 @@ class WoodPanel:
     def _loss_and_slope(self, top):
         """Return the surface loss [W/m^2] and its derivative [W/(m^2 K)] at theta `top`."""
         w = self.wood
-        t_a = w.ambient + KELVIN
-        t = top + t_a
-        np.maximum(t, 0.0, out=t)
-        squared = t * t
-        radiating = w.emissivity * STEFAN_BOLTZMANN
-        loss = w.convection_top * top + radiating * (squared * squared - t_a ** 4)
-        squared *= t
-        squared *= 4.0 * radiating
-        squared += w.convection_top
-        return loss, squared
+        top = np.ascontiguousarray(top, dtype=float)
+        loss, slope = np.empty_like(top), np.empty_like(top)
+        surface_loss(top.reshape(-1), w.ambient + KELVIN, w.convection_top,
+                     w.emissivity * STEFAN_BOLTZMANN, loss.reshape(-1), slope.reshape(-1))
+        return loss, slope
 
     def _loss_linearisation(self, top):
         """
@@ -498,10 +494,10 @@ class WoodPanel:
 
     def surface_sampler(self, x, y):
         """
-        Return sample() -> the surface temperature at fixed world points (x, y) now [degC].
+        Return a SurfaceSampler: sampler() -> the surface temperature at world points (x, y).
 
-        The interpolation weights are found once: sample() costs a gather per call. It is
-        valid while the patch stays where it is (``placement`` unchanged); it gives what
+        The interpolation weights are found once: a call costs a gather. It is valid while
+        the patch stays where it is (``placement`` unchanged); it gives what
         ``surface_temperature_at(x, y)`` gives.
         """
         x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
@@ -509,22 +505,7 @@ class WoodPanel:
         iy, wy = bilinear_weights(self.y_centres, y)
         inside = ((x >= self.x_edges[0]) & (x <= self.x_edges[-1])
                   & (y >= self.y_edges[0]) & (y <= self.y_edges[-1]))
-        columns = len(self.x_centres)
-        corner = iy * columns + ix
-        corners = (corner, corner + 1, corner + columns, corner + columns + 1)
-        weights = (1 - wx, wx, 1 - wy, wy)
-        placement = self.placement
-
-        def sample():
-            if self.placement != placement:
-                raise RuntimeError('the patch moved: make a new surface_sampler')
-            surface = self._surface.reshape(-1)
-            low_x, high_x, low_y, high_y = weights
-            value = (low_y * (low_x * surface[corners[0]] + high_x * surface[corners[1]])
-                     + high_y * (low_x * surface[corners[2]] + high_x * surface[corners[3]]))
-            return self.wood.ambient + np.where(inside, value, self.far_field[0])
-
-        return sample
+        return SurfaceSampler(self, iy * len(self.x_centres) + ix, wx, wy, inside)
 
     def char_at(self, x, y):
         """Char fraction of the raster pixel under world points (x, y) (0 off the panel)."""
@@ -654,9 +635,9 @@ class WoodPanel:
         """
         Evaporate water, then pyrolyse wood, in the cells hot enough (in place).
 
-        One comparison over the patch finds the cells above the lower of the two
-        temperatures (none when the patch's `highest` theta is below it); both sinks then
-        work on those few cells only. Returns the heat taken by each [J].
+        Cell by cell in one compiled loop (``kernels.heat_sinks``: ``_take_heat``'s rule),
+        skipped when the patch's `highest` theta is below both temperatures. Returns the
+        heat taken by each [J].
         """
         w = self.wood
         boiling = w.boiling_temperature - w.ambient
@@ -669,26 +650,13 @@ class WoodPanel:
                      threshold if pyrolysing else math.inf)
         if not highest > lowest:
             return 0.0, 0.0
-        theta = self._flat('theta')
-        candidates = np.flatnonzero(theta > lowest)
-        evaporated = pyrolysed = 0.0
-        if candidates.size == 0:
-            return evaporated, pyrolysed
-        rho_c = w.volumetric_heat_capacity
-        if evaporating:
-            moisture = self._flat('moisture')
-            wet = candidates[(theta[candidates] > boiling) & (moisture[candidates] > 0.0)]
-            evaporated = _take_heat(theta, moisture, wet, boiling, w.latent_heat,
-                                    moisture[wet], rho_c, self._volumes)
-        if pyrolysing:
-            unpyrolysed = self._flat('unpyrolysed')
-            hot = candidates[theta[candidates] > threshold]
-            rate = pyrolysis_rate(w, theta[hot] + w.ambient)
-            convertible = unpyrolysed[hot] * -np.expm1(-rate * dt)
-            pyrolysed = _take_heat(theta, unpyrolysed, hot, threshold,
-                                   w.heat_of_pyrolysis * w.density, convertible, rho_c,
-                                   self._volumes)
-        return evaporated, pyrolysed
+        return heat_sinks(self._flat('theta'), self._flat('moisture'),
+                          self._flat('unpyrolysed'), self._volumes, dt,
+                          w.volumetric_heat_capacity, boiling,
+                          w.latent_heat if evaporating else 0.0, threshold,
+                          w.heat_of_pyrolysis * w.density if pyrolysing else 0.0,
+                          w.ambient + KELVIN, w.char_preexponential,
+                          w.char_activation_energy, GAS_CONSTANT)
 
     def _step_far_field(self, dt, far_irradiance):
         """Backward-Euler step of the 1-D column far from the spot."""
@@ -758,3 +726,31 @@ class WoodPanel:
         cell = self.grid.fine_cell
         return (self.raster_origin[0] + (np.arange(self.raster_shape[1]) + 0.5) * cell,
                 self.raster_origin[1] + (np.arange(self.raster_shape[0]) + 0.5) * cell)
+
+
+class SurfaceSampler:
+    """The surface temperature of a panel at fixed world points (``surface_sampler``)."""
+
+    def __init__(self, panel, corner, wx, wy, inside):
+        """Keep the points' lower-left patch column `corner` (flat), weights and mask."""
+        self._panel = panel
+        self._placement = panel.placement
+        self.columns = len(panel.x_centres)
+        self.corner, self.wx, self.wy, self.inside = corner, wx, wy, inside
+
+    def surface(self):
+        """Return the panel's surface rise (flat, K) and far-field rise now (checked valid)."""
+        panel = self._panel
+        if panel.placement != self._placement:
+            raise RuntimeError('the patch moved: make a new surface_sampler')
+        return np.ascontiguousarray(panel._surface).reshape(-1), float(panel.far_field[0])
+
+    def __call__(self):
+        """Return the surface temperature at the points now [degC]."""
+        surface, far = self.surface()
+        corner, columns, wx, wy = self.corner, self.columns, self.wx, self.wy
+        low_x, low_y = 1 - wx, 1 - wy
+        value = (low_y * (low_x * surface[corner] + wx * surface[corner + 1])
+                 + wy * (low_x * surface[corner + columns]
+                         + wx * surface[corner + columns + 1]))
+        return self._panel.wood.ambient + np.where(self.inside, value, far)
