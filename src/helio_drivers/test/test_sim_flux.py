@@ -126,6 +126,7 @@ def test_lens_shadow_by_quadratic_form_equals_casting_each_point_to_the_lens():
             expected[row, col] = (distance > 0.0 and np.linalg.norm(hit - field.lens_centre)
                                   <= field.aperture_radius)
     assert 500 < shadow.sum() and np.array_equal(shadow, expected)
+    assert np.array_equal(field.in_shadow_grid(xs, ys), expected)
 
 
 def test_binning_on_uneven_edges_equals_numpy_histogram2d():

@@ -694,7 +694,7 @@ def light_window(field, shape, origin, pixel_size, window):
         return None
     xs = origin[0] + (np.arange(c0, c1) + 0.5) * pixel_size
     ys = origin[1] + (np.arange(r0, r1) + 0.5) * pixel_size
-    shadow = field.in_shadow(xs[None, :], ys[:, None])
+    shadow = field.in_shadow_grid(xs, ys)
     # the rays' power binned per raster pixel (bincount: np.histogram2d's searches cost
     # ~10 ms for 120 000 rays, this ~1 ms)
     column = np.floor((field.points[:, 0] - origin[0]) / pixel_size).astype(np.int64) - c0

@@ -21,7 +21,7 @@ carries its traced rays along, exactly); a cloud just scales it.
 from dataclasses import dataclass, replace
 import math
 
-from helio_drivers.sim.kernels import bin_points
+from helio_drivers.sim.kernels import bin_points, shadow_grid
 from helio_optics.geometry import invert_transform
 from helio_optics.lens import (area_samples, LensParameters, pmma_index, SOLAR_BANDS,
                                trace_bands)
@@ -68,21 +68,51 @@ class FluxField:
         """
         x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
         shape = np.broadcast_shapes(x.shape, y.shape)
-        towards_sun = -self.sun_ray
-        normal = self.lens_axis
-        denominator = float(towards_sun @ normal)
-        if abs(denominator) < 1e-9:
+        form = self._shadow_form()
+        if form is None:
             return np.zeros(shape, bool)
-        # offset at the lens plane of panel point p: Q (p - O), Q the oblique projector
-        projector = np.eye(3) - np.outer(towards_sun, normal) / denominator
-        a, b = projector[:, 0], projector[:, 1]
-        c = -projector @ self.lens_centre
-        radial2 = ((a @ a) * x * x + (2.0 * (a @ b)) * x * y + (b @ b) * y * y
-                   + (2.0 * (a @ c)) * x + (2.0 * (b @ c)) * y + (c @ c))
-        distance = (float(self.lens_centre @ normal) - normal[0] * x
-                    - normal[1] * y) / denominator
-        return np.broadcast_to((distance > 0.0) & (radial2 <= self.aperture_radius ** 2),
-                               shape)
+        aa, ab2, bb, ac2, bc2, cc, r2, d0, n0, n1, denominator = form
+        radial2 = aa * x * x + ab2 * x * y + bb * y * y + ac2 * x + bc2 * y + cc
+        distance = (d0 - n0 * x - n1 * y) / denominator
+        return np.broadcast_to((distance > 0.0) & (radial2 <= r2), shape)
+
+    def in_shadow_grid(self, xs, ys):
+        """
+        Return ``in_shadow(xs[None, :], ys[:, None])`` (len(ys), len(xs)) in one pass.
+
+        The same arithmetic compiled over the grid (``kernels.shadow_grid``).
+        """
+        xs = np.ascontiguousarray(xs, dtype=float)
+        ys = np.ascontiguousarray(ys, dtype=float)
+        out = np.zeros((len(ys), len(xs)), bool)
+        form = self._shadow_form()
+        if form is not None:
+            shadow_grid(xs, ys, form, out)
+        return out
+
+    def _shadow_form(self):
+        """
+        Return the coefficients of the shadow test (see ``in_shadow``), or None.
+
+        (aa, 2ab, bb, 2ac, 2bc, cc, r^2, d0, n0, n1, denominator); None when the sun ray
+        runs in the lens plane.
+        """
+        if not hasattr(self, '_form'):
+            towards_sun = -self.sun_ray
+            normal = self.lens_axis
+            denominator = float(towards_sun @ normal)
+            if abs(denominator) < 1e-9:
+                self._form = None
+                return None
+            # offset at the lens plane of panel point p: Q (p - O), Q the oblique projector
+            projector = np.eye(3) - np.outer(towards_sun, normal) / denominator
+            a, b = projector[:, 0], projector[:, 1]
+            c = -projector @ self.lens_centre
+            self._form = (float(a @ a), float(2.0 * (a @ b)), float(b @ b),
+                          float(2.0 * (a @ c)), float(2.0 * (b @ c)), float(c @ c),
+                          float(self.aperture_radius ** 2), float(self.lens_centre @ normal),
+                          float(normal[0]), float(normal[1]), denominator)
+        return self._form
 
 
 class LensFlux:
@@ -290,7 +320,7 @@ def shadow_fractions(field, x_edges, y_edges, samples=3):
     shadow, the aperture's size, is far larger than a cell); only the cells along its
     edge are sampled.
     """
-    corners = field.in_shadow(x_edges[None, :], y_edges[:, None])      # (ny + 1, nx + 1)
+    corners = field.in_shadow_grid(x_edges, y_edges)                   # (ny + 1, nx + 1)
     inside = corners[:-1, :-1] & corners[:-1, 1:] & corners[1:, :-1] & corners[1:, 1:]
     outside = ~(corners[:-1, :-1] | corners[:-1, 1:] | corners[1:, :-1] | corners[1:, 1:])
     edge = ~(inside | outside)

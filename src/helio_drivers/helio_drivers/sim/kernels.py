@@ -371,3 +371,24 @@ def thermal_counts(seen_position, corner, columns, wx, wy, inside, surface, far,
             value = min(max(value, floor), cap)
             counts = np.rint((value + 273.15) * 100.0)
             out[r, c] = np.uint16(min(max(counts, 0.0), 65535.0))
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def shadow_grid(xs, ys, form, out):
+    """
+    Fill `out` (len(ys), len(xs)) bool: the panel points (xs[i], ys[j]) in the lens shadow.
+
+    `form` = (aa, 2ab, bb, 2ac, 2bc, cc, r^2, d0, n0, n1, denominator): the offset from the
+    lens centre where the sunward ray from (x, y) meets the lens plane has the squared
+    length aa x^2 + 2ab x y + bb y^2 + 2ac x + 2bc y + cc and the ray's length to it is
+    (d0 - n0 x - n1 y) / denominator (``FluxField.in_shadow``, the same arithmetic in the
+    same order).
+    """
+    aa, ab2, bb, ac2, bc2, cc, r2, d0, n0, n1, denominator = form
+    for j in range(ys.shape[0]):
+        y = ys[j]
+        for i in range(xs.shape[0]):
+            x = xs[i]
+            radial2 = aa * x * x + ab2 * x * y + bb * y * y + ac2 * x + bc2 * y + cc
+            distance = (d0 - n0 * x - n1 * y) / denominator
+            out[j, i] = distance > 0.0 and radial2 <= r2
