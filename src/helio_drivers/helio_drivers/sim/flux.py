@@ -163,6 +163,7 @@ class LensFlux:
         self._field = None
         self._key = None
         self._traced = None
+        self._asked = None     # the last pose and sun ray asked for, as given
         self._field_is_sparse = False
         self.traces = 0     # traces done
         self.fields = 0     # fields made (traced, or carried along with the lens)
@@ -180,6 +181,11 @@ class LensFlux:
         """
         T = np.asarray(T_world_lens, dtype=float)
         s0 = np.asarray(sun_ray_world, dtype=float)
+        asked = self._asked
+        if (asked is not None and (moving or not self._field_is_sparse)
+                and np.array_equal(T, asked[0]) and np.array_equal(s0, asked[1])):
+            return self._field           # asked again for the same pose and sun (held still)
+        self._asked = (T.copy(), s0.copy())
         s0 = s0 / np.linalg.norm(s0)
         sparse = moving and self.moving_stride > 1
         traced = self._traced

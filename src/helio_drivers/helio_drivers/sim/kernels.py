@@ -88,7 +88,9 @@ def _explicit_terms(theta, dt_ay_ops, dt_az_ops, top_loss, dt_ay, dt_az):
 def douglas_step(theta, out, dt_source, top_loss, dt_ay_ops, dt_az_ops, x_factors,
                  y_factors, z_elimination, top_pivot):
     """
-    One Douglas ADI step for backward Euler of the patch (wood.py), into `out`; return max.
+    One Douglas ADI step for backward Euler of the patch (wood.py), into `out`.
+
+    Returns the highest new rise of each layer (z,).
 
     theta (z, y, x) the rises now, out the same shape (overwritten with the new ones),
     dt_source (y, x) dt times the surface source of the top layer, top_loss (y, x) dt h_top
@@ -148,11 +150,13 @@ def douglas_step(theta, out, dt_source, top_loss, dt_ay_ops, dt_az_ops, x_factor
         for j in range(ny):
             for i in range(nx):
                 out[k, j, i] -= dt_az[k, j, i]
+    layer_max = np.empty(nz)
     if nz == 1:
         for j in range(ny):
             for i in range(nx):
                 out[0, j, i] /= top_pivot[j, i]
-        return out.max()
+        layer_max[0] = out.max()
+        return layer_max
     inverse = z_inverse[nz - 1]
     for j in range(ny):
         for i in range(nx):
@@ -167,12 +171,17 @@ def douglas_step(theta, out, dt_source, top_loss, dt_ay_ops, dt_az_ops, x_factor
     for j in range(ny):
         for i in range(nx):
             out[0, j, i] = (out[0, j, i] - a * out[1, j, i]) / top_pivot[j, i]
+    layer_max[0] = out[0].max()
     for k in range(1, nz):
         f = factor[k]
+        highest = -np.inf
         for j in range(ny):
             for i in range(nx):
-                out[k, j, i] -= f * out[k - 1, j, i]
-    return out.max()
+                value = out[k, j, i] - f * out[k - 1, j, i]
+                out[k, j, i] = value
+                highest = max(highest, value)
+        layer_max[k] = highest
+    return layer_max
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
@@ -303,11 +312,11 @@ def surface_loss(top, ambient_kelvin, convection, radiating, loss, slope):
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
-def heat_sinks(theta, moisture, unpyrolysed, volumes, dt, rho_c, boiling, latent_heat,
-               threshold, heat_per_wood, ambient_kelvin, preexponential, activation,
-               gas_constant):
+def heat_sinks(theta, moisture, unpyrolysed, volumes, cells, dt, rho_c, boiling,
+               latent_heat, threshold, heat_per_wood, ambient_kelvin, preexponential,
+               activation, gas_constant):
     """
-    Evaporate water, then pyrolyse wood, cell by cell (flat arrays, in place).
+    Evaporate water, then pyrolyse wood, cell by cell in flat cells [0, cells), in place.
 
     A cell above `boiling` [K rise] with water left turns its excess heat
     rho_c (theta - boiling) into evaporation up to the water it holds (latent_heat [J/kg],
@@ -320,7 +329,7 @@ def heat_sinks(theta, moisture, unpyrolysed, volumes, dt, rho_c, boiling, latent
     pyrolysed = 0.0
     evaporating = latent_heat > 0.0
     pyrolysing = heat_per_wood > 0.0
-    for p in range(theta.shape[0]):
+    for p in range(cells):
         rise = theta[p]
         if evaporating and rise > boiling and moisture[p] > 0.0:
             used = min(rho_c * (rise - boiling), moisture[p] * latent_heat)

@@ -605,15 +605,15 @@ class WoodPanel:
         top_loss = h_top * (dt / (rho_c * dz0))
         dt_ay, dt_az, x_factors, y_factors, z_elimination, top = self._sweep_coefficients(dt)
         u3 = np.empty_like(theta)
-        highest = douglas_step(theta, u3, dt_source, top_loss, dt_ay, dt_az, x_factors,
-                               y_factors, z_elimination, top_loss + top)
+        layer_max = douglas_step(theta, u3, dt_source, top_loss, dt_ay, dt_az, x_factors,
+                                 y_factors, z_elimination, top_loss + top)
 
         areas = self.cell_areas
         self.ledger.absorbed += dt * float(np.sum(absorbed * areas))
         self.ledger.lost_top += dt * float(np.sum((h_top * u3[0] + remainder) * areas))
         self.ledger.lost_back += dt * float(np.sum(self._h_back * u3[-1] * areas))
         self.theta = u3
-        evaporated, pyrolysed = self._heat_sinks(dt, highest)
+        evaporated, pyrolysed = self._heat_sinks(dt, layer_max)
         self.ledger.evaporated += evaporated
         self.ledger.pyrolysed += pyrolysed
         self._last_absorbed = absorbed
@@ -631,13 +631,14 @@ class WoodPanel:
             setattr(self, name, field)
         return field.reshape(-1)
 
-    def _heat_sinks(self, dt, highest=math.inf):
+    def _heat_sinks(self, dt, layer_max=None):
         """
         Evaporate water, then pyrolyse wood, in the cells hot enough (in place).
 
-        Cell by cell in one compiled loop (``kernels.heat_sinks``: ``_take_heat``'s rule),
-        skipped when the patch's `highest` theta is below both temperatures. Returns the
-        heat taken by each [J].
+        Cell by cell in one compiled loop (``kernels.heat_sinks``: ``_take_heat``'s rule)
+        over the layers down to the last whose highest rise (`layer_max`, from the step;
+        None: all) passes the lower of the two temperatures. Returns the heat taken by
+        each [J].
         """
         w = self.wood
         boiling = w.boiling_temperature - w.ambient
@@ -648,10 +649,15 @@ class WoodPanel:
             return 0.0, 0.0
         lowest = min(boiling if evaporating else math.inf,
                      threshold if pyrolysing else math.inf)
-        if not highest > lowest:
+        layers = len(self.z_widths)
+        if layer_max is not None:
+            hot = np.flatnonzero(np.asarray(layer_max) > lowest)
+            layers = int(hot[-1]) + 1 if hot.size else 0
+        if layers == 0:
             return 0.0, 0.0
         return heat_sinks(self._flat('theta'), self._flat('moisture'),
-                          self._flat('unpyrolysed'), self._volumes, dt,
+                          self._flat('unpyrolysed'), self._volumes,
+                          layers * self.cell_areas.size, dt,
                           w.volumetric_heat_capacity, boiling,
                           w.latent_heat if evaporating else 0.0, threshold,
                           w.heat_of_pyrolysis * w.density if pyrolysing else 0.0,

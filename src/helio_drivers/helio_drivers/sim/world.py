@@ -200,6 +200,8 @@ class SimWorld:
         self._light = None
         self._pose_key = None
         self._pose = None
+        self._lens_pose_key = None
+        self._T_world_lens = None
         self.steps = 0
         self._refresh()
 
@@ -280,8 +282,12 @@ class SimWorld:
             self._sun_up = position.elevation > 0.0
         self._dni = self.sun.dni * self.sun.clouds.attenuation(now) if self._sun_up else 0.0
         pose_key = self._pose_key
-        T_world_lens = lens_pose_in_world(self.T_robot_world, self.pose().T_robot_lens)
+        pose = self.pose()
         moving = pose_key is not None and self._pose_key != pose_key   # since the last step
+        if self._lens_pose_key != self._pose_key:
+            self._T_world_lens = lens_pose_in_world(self.T_robot_world, pose.T_robot_lens)
+            self._lens_pose_key = self._pose_key
+        T_world_lens = self._T_world_lens
         self._field = self.flux.field(T_world_lens, self._sun_ray, moving=moving)
         centroid = self._field.centroid()
         self.panel.follow(centroid)
