@@ -21,7 +21,7 @@ carries its traced rays along, exactly); a cloud just scales it.
 from dataclasses import dataclass, replace
 import math
 
-from helio_drivers.sim.kernels import bin_points, shadow_grid
+from helio_drivers.sim.kernels import bin_points, points_summary, shadow_grid
 from helio_optics.geometry import invert_transform
 from helio_optics.lens import (area_samples, LensParameters, pmma_index, SOLAR_BANDS,
                                trace_bands)
@@ -47,11 +47,22 @@ class FluxField:
 
     def centroid(self):
         """Return the power-weighted centre of the concentrated spot (x, y) [m], or None."""
-        if not hasattr(self, '_centroid'):
-            total = float(self.power.sum())
-            self._centroid = (None if total <= 0.0 else
-                              (self.points * self.power[:, None]).sum(axis=0) / total)
-        return self._centroid
+        total, sx, sy = self._summary()[:3]
+        return None if total <= 0.0 else np.array([sx / total, sy / total])
+
+    def bounds(self):
+        """Return the rays' box (x_min, y_min), (x_max, y_max) [m], or None without rays."""
+        if not self.points.size:
+            return None
+        summary = self._summary()
+        return np.array(summary[3:5]), np.array(summary[5:7])
+
+    def _summary(self):
+        """Return (power, power-weighted x and y sums, box) of the rays, once per field."""
+        if not hasattr(self, '_sums'):
+            self._sums = points_summary(np.ascontiguousarray(self.points, dtype=float),
+                                        np.ascontiguousarray(self.power, dtype=float))
+        return self._sums
 
     def total_power(self):
         """Concentrated power on the panel per unit DNI [m^2]."""
@@ -298,8 +309,24 @@ def bin_on_edges(x, y, weights, x_edges, y_edges):
     y_edges = np.ascontiguousarray(y_edges, dtype=float)
     out = np.zeros((len(y_edges) - 1, len(x_edges) - 1))
     bin_points(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(y, dtype=float),
-               np.ascontiguousarray(weights, dtype=float), x_edges, y_edges, out)
+               np.ascontiguousarray(weights, dtype=float), x_edges, y_edges,
+               _even_run(x_edges), _even_run(y_edges), out)
     return out
+
+
+def _even_run(edges):
+    """Return (first, last) edge indices of the longest run of equal cells (1e-9 rel.)."""
+    widths = np.diff(edges)
+    if widths.size == 0:
+        return (0, 0)
+    same = np.abs(np.diff(widths)) <= 1e-9 * widths[1:]
+    best, start, run = (0, 1), 0, 1
+    for k, equal in enumerate(same, start=1):
+        run = run + 1 if equal else 1
+        start = start if equal else k
+        if run > best[1] - best[0]:
+            best = (start, start + run)
+    return best
 
 
 def irradiance_on_cells(field, x_edges, y_edges, dni, shadow_samples=3):

@@ -268,30 +268,39 @@ def bilinear_weights_on_axis(centres, coordinates, index, weight):
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
-def bin_points(x, y, weights, x_edges, y_edges, out):
+def bin_points(x, y, weights, x_edges, y_edges, x_even, y_even, out):
     """
     Add `weights` of points (x, y) to the cells (y, x) of increasing edges in `out`.
 
     ``np.histogram2d(y, x, bins=(y_edges, x_edges), weights=weights)``'s rule: a cell holds
     its low edge, the last cell its high edge too; points outside (or NaN) are left out.
-    A binary search per axis and point (numpy's searchsorted and bincount made a pass and
-    a temporary each).
+    `x_even` and `y_even` = (first, last) edge indices of a run of cells of equal width
+    (the patch's fine region, where the spot is): a point there finds its cell by
+    arithmetic, checked against the edges; elsewhere by binary search.
     """
     nx, ny = len(x_edges) - 1, len(y_edges) - 1
     for p in range(len(x)):
-        column = _cell_of(x_edges, nx, x[p])
-        row = _cell_of(y_edges, ny, y[p])
+        column = _cell_of(x_edges, nx, x_even[0], x_even[1], x[p])
+        row = _cell_of(y_edges, ny, y_even[0], y_even[1], y[p])
         if column >= 0 and row >= 0:
             out[row, column] += weights[p]
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
-def _cell_of(edges, cells, value):
+def _cell_of(edges, cells, first, last, value):
     """Return the cell of `value` (histogram rule, see ``bin_points``), -1 outside."""
     if not (value >= edges[0] and value <= edges[cells]):
         return -1
     if value == edges[cells]:
         return cells - 1
+    if last > first and value >= edges[first] and value < edges[last]:
+        width = (edges[last] - edges[first]) / (last - first)
+        cell = min(max(first + int((value - edges[first]) / width), first), last - 1)
+        while value < edges[cell]:          # rounding: the edges decide
+            cell -= 1
+        while value >= edges[cell + 1]:
+            cell += 1
+        return cell
     return _first_at_or_above(edges, value, True) - 1
 
 
@@ -401,3 +410,26 @@ def shadow_grid(xs, ys, form, out):
             radial2 = aa * x * x + ab2 * x * y + bb * y * y + ac2 * x + bc2 * y + cc
             distance = (d0 - n0 * x - n1 * y) / denominator
             out[j, i] = distance > 0.0 and radial2 <= r2
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def points_summary(points, power):
+    """
+    Return (sum power, sum power x, sum power y, x min, y min, x max, y max) of (N, 2).
+
+    One pass over the rays (numpy's reductions along the first axis of (N, 2) made one
+    strided pass each).
+    """
+    total = sx = sy = 0.0
+    x_min = y_min = np.inf
+    x_max = y_max = -np.inf
+    for p in range(points.shape[0]):
+        x, y, w = points[p, 0], points[p, 1], power[p]
+        total += w
+        sx += w * x
+        sy += w * y
+        x_min = min(x_min, x)
+        x_max = max(x_max, x)
+        y_min = min(y_min, y)
+        y_max = max(y_max, y)
+    return total, sx, sy, x_min, y_min, x_max, y_max

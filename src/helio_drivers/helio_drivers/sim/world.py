@@ -348,7 +348,7 @@ class SimWorld:
         reach = field.aperture_radius / max(abs(s0[2]), 0.2) + 0.004
         boxes = [(centre[0] - reach, centre[0] + reach, centre[1] - reach, centre[1] + reach)]
         if field.points.size:
-            lo, hi = field.points.min(axis=0), field.points.max(axis=0)
+            lo, hi = field.bounds()
             boxes.append((lo[0] - 0.002, hi[0] + 0.002, lo[1] - 0.002, hi[1] + 0.002))
         return (min(b[0] for b in boxes), max(b[1] for b in boxes),
                 min(b[2] for b in boxes), max(b[3] for b in boxes))
