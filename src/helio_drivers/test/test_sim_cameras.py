@@ -287,7 +287,8 @@ def test_compiled_table_read_out_equals_the_numpy_and_opencv_passes_it_replaced(
         np.clip(index, 0.0, float(read_out._last), out=index)
         index = (index + np.float32(0.5)).astype(np.intp)
         prepared = read_out.prepare(light, per_pixel)
-        assert np.array_equal(prepared[0], index)
+        assert np.array_equal(prepared[0], read_out._level[index])
+        assert np.array_equal(prepared[1], read_out._gain[index])
         # the same noise offset drawn for both (a generator of the same seed)
         frame = read_out.expose(prepared, np.random.default_rng(9))
         k, offset = (int(v) for v in np.random.default_rng(9).integers(
@@ -297,8 +298,8 @@ def test_compiled_table_read_out_equals_the_numpy_and_opencv_passes_it_replaced(
         assert np.array_equal(frame, cv2.add(read_out._level[index], product,
                                              dtype=cv2.CV_8U))
     part = light[5:30, 7:50]    # a part of a frame (not contiguous)
-    index, _ = read_out.prepare(part, scale[5:30, 7:50])
-    assert np.array_equal(index, read_out.prepare(part.copy(), scale[5:30, 7:50].copy())[0])
+    level, _ = read_out.prepare(part, scale[5:30, 7:50])
+    assert np.array_equal(level, read_out.prepare(part.copy(), scale[5:30, 7:50].copy())[0])
 
 
 def test_ground_light_by_homography_equals_casting_every_pixel_ray():

@@ -185,14 +185,15 @@ def douglas_step(theta, out, dt_source, top_loss, dt_ay_ops, dt_az_ops, x_factor
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
-def tone_table_index(light, scale, uniform_scale, last, index):
+def tone_table_read_out(light, scale, uniform_scale, last, level_table, gain_table, level,
+                        gain):
     """
-    Fill `index` (h, w, c) uint16: the NoisyReadOut tables' index of each element's light.
+    Fill `level` and `gain` (h, w, c) float32 from tables indexed by light (NoisyReadOut).
 
-    Per element, in single precision as numpy's passes did it: light x scale (or x
+    Per element, in single precision as numpy's passes did it: index = light x scale (or x
     `uniform_scale` when `scale` is empty), clipped to [0, last] (NaN to 0), + 0.5,
-    truncated. One pass writing 2 bytes per element instead of six passes writing the
-    level and gain (8 bytes): the frame is bound by memory traffic, not arithmetic.
+    truncated; then level = level_table[index], gain = gain_table[index]. One pass instead
+    of six (the product, the clip, the rounding, the cast and two look-ups).
     """
     height, width, channels = light.shape
     uniform = scale.shape[0] == 0
@@ -210,22 +211,23 @@ def tone_table_index(light, scale, uniform_scale, last, index):
                     value = zero
                 elif value > top:
                     value = top
-                index[r, c, k] = np.uint16(value + half)
+                index = int(value + half)
+                level[r, c, k] = level_table[index]
+                gain[r, c, k] = gain_table[index]
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
-def noisy_tone_read_out(index, level_table, gain_table, noise, out):
+def noisy_read_out(level, gain, noise, out):
     """
-    Fill `out` uint8: round(level[index] + gain[index] x noise), saturated to 0..255.
+    Fill `out` uint8: round(level + gain x noise), saturated to 0..255 (flat arrays).
 
-    `index`, `noise` (int8) and `out` are flat arrays of one length; the arithmetic is
     OpenCV's multiply-then-add of the same float32 values (rounding half to even, as
-    ``cvRound``), in one pass reading 3 bytes and writing 1 per element.
+    ``cvRound``) in one vectorised pass: no look-up per element (a gather per element
+    costs seven times this pass), the tables were read once when the light changed.
     """
     low, high = np.float32(0.0), np.float32(255.0)
-    for p in range(index.shape[0]):
-        i = index[p]
-        value = level_table[i] + gain_table[i] * np.float32(noise[p])
+    for p in range(level.shape[0]):
+        value = level[p] + gain[p] * np.float32(noise[p])
         out[p] = np.uint8(np.rint(min(max(value, low), high)))
 
 
