@@ -21,7 +21,7 @@ carries its traced rays along, exactly); a cloud just scales it.
 from dataclasses import dataclass, replace
 import math
 
-from helio_drivers.sim.kernels import bin_points, points_summary, shadow_grid
+from helio_drivers.sim.kernels import bin_points, points_summary, shadow_grid, shadow_samples
 from helio_optics.geometry import invert_transform
 from helio_optics.lens import (area_samples, LensParameters, pmma_index, SOLAR_BANDS,
                                trace_bands)
@@ -320,13 +320,11 @@ def _even_run(edges):
     if widths.size == 0:
         return (0, 0)
     same = np.abs(np.diff(widths)) <= 1e-9 * widths[1:]
-    best, start, run = (0, 1), 0, 1
-    for k, equal in enumerate(same, start=1):
-        run = run + 1 if equal else 1
-        start = start if equal else k
-        if run > best[1] - best[0]:
-            best = (start, start + run)
-    return best
+    # runs of cells: a new run starts at every cell not equal to the one before it
+    starts = np.concatenate([[0], np.flatnonzero(~same) + 1])
+    ends = np.concatenate([starts[1:], [widths.size]])
+    longest = int(np.argmax(ends - starts))
+    return int(starts[longest]), int(ends[longest])
 
 
 def irradiance_on_cells(field, x_edges, y_edges, dni, shadow_samples=3):
@@ -351,7 +349,7 @@ def shadow_fractions(field, x_edges, y_edges, samples=3):
     The shadow is convex: a cell whose four corners are in it is in it, and one whose
     corners are all out and whose neighbours' corners are all out too is out of it (the
     shadow, the aperture's size, is far larger than a cell); only the cells along its
-    edge are sampled.
+    edge are sampled (``kernels.shadow_samples``).
     """
     corners = field.in_shadow_grid(x_edges, y_edges)                   # (ny + 1, nx + 1)
     inside = corners[:-1, :-1] & corners[:-1, 1:] & corners[1:, :-1] & corners[1:, 1:]
@@ -364,11 +362,11 @@ def shadow_fractions(field, x_edges, y_edges, samples=3):
     near[:, :-1] |= near[:, 1:].copy()
     shadow = inside.astype(float)
     rows, cols = np.nonzero(near)
-    if rows.size:
-        fractions = (np.arange(samples) + 0.5) / samples
-        xs = x_edges[cols, None] + fractions[None] * (x_edges[cols + 1] - x_edges[cols])[:, None]
-        ys = y_edges[rows, None] + fractions[None] * (y_edges[rows + 1] - y_edges[rows])[:, None]
-        shadow[rows, cols] = field.in_shadow(xs[:, None, :], ys[:, :, None]).mean(axis=(1, 2))
+    form = field._shadow_form()
+    if rows.size and form is not None:
+        shadow_samples(np.ascontiguousarray(x_edges, dtype=float),
+                       np.ascontiguousarray(y_edges, dtype=float), rows, cols, form,
+                       int(samples), shadow)
     return shadow
 
 

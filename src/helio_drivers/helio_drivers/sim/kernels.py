@@ -435,3 +435,28 @@ def points_summary(points, power):
         y_min = min(y_min, y)
         y_max = max(y_max, y)
     return total, sx, sy, x_min, y_min, x_max, y_max
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def shadow_samples(x_edges, y_edges, rows, cols, form, samples, out):
+    """
+    Set out[rows[q], cols[q]] to the share of the cell's samples^2 points in the shadow.
+
+    The points are at the fractions (k + 0.5) / samples of each cell side; the test is
+    ``shadow_grid``'s (the same arithmetic).
+    """
+    aa, ab2, bb, ac2, bc2, cc, r2, d0, n0, n1, denominator = form
+    for q in range(rows.shape[0]):
+        row, col = rows[q], cols[q]
+        x0, width = x_edges[col], x_edges[col + 1] - x_edges[col]
+        y0, height = y_edges[row], y_edges[row + 1] - y_edges[row]
+        count = 0
+        for a in range(samples):
+            y = y0 + ((a + 0.5) / samples) * height
+            for b in range(samples):
+                x = x0 + ((b + 0.5) / samples) * width
+                radial2 = aa * x * x + ab2 * x * y + bb * y * y + ac2 * x + bc2 * y + cc
+                distance = (d0 - n0 * x - n1 * y) / denominator
+                if distance > 0.0 and radial2 <= r2:
+                    count += 1
+        out[row, col] = count / (samples * samples)
