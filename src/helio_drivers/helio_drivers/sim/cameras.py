@@ -232,7 +232,8 @@ class NoisyReadOut:
         self._level = (curve + bend * sigma * sigma).astype(np.float32)
         self._gain = (slope * sigma).astype(np.float32)
         self._last = len(curve) - 1
-        self._no_scale = np.zeros((0, 0, 0), np.float32)
+        self._no_scale = np.zeros(0, np.float32)
+        self._index = None
         self.shape = tuple(shape)
         # flat frames a few rows longer than the image: a crop at any offset is contiguous
         self._size = int(np.prod(self.shape))
@@ -253,18 +254,20 @@ class NoisyReadOut:
         `scale`: table steps per unit of light per pixel (`index_scale` x a gain the light
         still needs, such as the vignetting: one pass for both), or None.
         """
-        light = np.asarray(light, dtype=np.float32)
-        cube = light.reshape(light.shape[:2] + (-1,)) if light.ndim >= 2 else \
-            light.reshape(1, -1, 1)
+        light = np.ascontiguousarray(light, dtype=np.float32)
         if scale is None:
             scale = self._no_scale
         else:
-            scale = np.asarray(scale, dtype=np.float32).reshape(cube.shape)
-        level = np.empty(cube.shape, np.float32)
-        gain = np.empty(cube.shape, np.float32)
-        tone_table_read_out(cube, scale, np.float32(self.index_scale()), self._last,
-                            self._level, self._gain, level, gain)
-        return level.reshape(light.shape), gain.reshape(light.shape)
+            scale = np.ascontiguousarray(np.broadcast_to(scale, light.shape),
+                                         dtype=np.float32).reshape(-1)
+        level = np.empty(light.shape, np.float32)
+        gain = np.empty(light.shape, np.float32)
+        if self._index is None or self._index.size < light.size:
+            self._index = np.empty(light.size, np.int32)     # scratch, reused
+        tone_table_read_out(light.reshape(-1), scale, np.float32(self.index_scale()),
+                            self._last, self._level, self._gain, level.reshape(-1),
+                            gain.reshape(-1), self._index)
+        return level, gain
 
     def expose(self, prepared, rng=None):
         """Return the 8-bit frame of (level, gain): noise from a random offset in the bank."""

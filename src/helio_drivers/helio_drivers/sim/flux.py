@@ -21,7 +21,8 @@ carries its traced rays along, exactly); a cloud just scales it.
 from dataclasses import dataclass, replace
 import math
 
-from helio_drivers.sim.kernels import bin_points, points_summary, shadow_grid, shadow_samples
+from helio_drivers.sim.kernels import (bin_points, carried_points, points_summary, shadow_grid,
+                                       shadow_samples)
 from helio_optics.geometry import invert_transform
 from helio_optics.lens import (area_samples, LensParameters, pmma_index, SOLAR_BANDS,
                                trace_bands)
@@ -282,7 +283,10 @@ class _TracedRays:
         points, slopes, power, tir_fraction = self._sets['moving' if sparse else 'all']
         shift = np.asarray(lens_centre, dtype=float) - self._origin
         if np.any(shift):
-            points = points + shift[:2] - shift[2] * slopes
+            moved = np.empty_like(points)
+            carried_points(points, slopes, float(shift[0]), float(shift[1]), float(shift[2]),
+                           moved)
+            points = moved
         return FluxField(points=points, power=power, lens_centre=np.array(lens_centre,
                                                                           dtype=float),
                          tir_fraction=tir_fraction, **self._common)
@@ -308,14 +312,27 @@ def bin_on_edges(x, y, weights, x_edges, y_edges):
     x_edges = np.ascontiguousarray(x_edges, dtype=float)
     y_edges = np.ascontiguousarray(y_edges, dtype=float)
     out = np.zeros((len(y_edges) - 1, len(x_edges) - 1))
-    bin_points(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(y, dtype=float),
-               np.ascontiguousarray(weights, dtype=float), x_edges, y_edges,
-               _even_run(x_edges), _even_run(y_edges), out)
+    bin_points(np.asarray(x, dtype=float), np.asarray(y, dtype=float),
+               np.asarray(weights, dtype=float), x_edges, y_edges, _even_run(x_edges),
+               _even_run(y_edges), out)
     return out
+
+
+_EVEN_RUNS = {}
 
 
 def _even_run(edges):
     """Return (first, last) edge indices of the longest run of equal cells (1e-9 rel.)."""
+    key = edges.tobytes()
+    if key not in _EVEN_RUNS:
+        if len(_EVEN_RUNS) > 64:
+            _EVEN_RUNS.clear()
+        _EVEN_RUNS[key] = _find_even_run(edges)
+    return _EVEN_RUNS[key]
+
+
+def _find_even_run(edges):
+    """Find ``_even_run``'s answer."""
     widths = np.diff(edges)
     if widths.size == 0:
         return (0, 0)
