@@ -75,10 +75,12 @@ def test_thermal_image_in_one_pass_equals_the_temperatures_encoded(sigma):
     camera = ThermalCamera(ThermalSettings(noise_sigma=sigma))
     for pose in (look_at([-0.03, 0.0, 0.09], [0.01, 0.005, 0.0], up=(1.0, 0.0, 0.0)),
                  look_at([0.02, 0.05, 0.05], [0.06, 0.04, 0.0], up=(1.0, 0.0, 0.0))):
+        # a new view (ground points searched per pixel), then the kept one (its sampler)
         counts = camera.image(panel, pose, np.random.default_rng(8))
+        kept = camera.image(panel, pose, np.random.default_rng(8))
         expected = celsius_to_centikelvin(camera.temperatures(panel, pose,
                                                               np.random.default_rng(8)))
-        assert np.array_equal(counts, expected)
+        assert np.array_equal(counts, expected) and np.array_equal(kept, expected)
     assert centikelvin_to_celsius(counts.min()) < 30.0
 
 

@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import math
 
 import cv2
-from helio_drivers.sim.kernels import noisy_read_out, thermal_counts, tone_table_read_out
+from helio_drivers.sim.kernels import (noisy_read_out, thermal_counts, thermal_counts_at,
+                                       tone_table_read_out)
 from helio_optics.geometry import PinholeCamera
 from helio_optics.ground_render import (decode_srgb8, GroundRenderer, GroundTexture,
                                         jpeg_round_trip, linear_to_srgb,
@@ -111,6 +112,7 @@ class ThermalCamera:
         self._renderer = GroundRenderer(self.camera, supersample=1)
         self._view_key = None      # (pose, panel, placement) of the kept view
         self._view = None          # (pixels seeing the panel, their surface sampler)
+        self._ground = None        # the pixels' ground points (x, y) of the kept view
         self._noise = NoiseBank((self.camera.height, self.camera.width), seed)
         self._no_noise = np.zeros((self.camera.height, self.camera.width))
 
@@ -130,34 +132,54 @@ class ThermalCamera:
         Kept while the camera and the heat patch stand still (they do while a dot heats):
         a frame then costs the gather of the surface field, not the ray casts.
         """
-        key = (np.asarray(T_world_camera, dtype=np.float64).tobytes(), id(panel),
-               panel.placement)
-        if key != self._view_key:
-            x, y = self._renderer.ground_points(T_world_camera)
+        self._ground_points(panel, T_world_camera)
+        if self._view is None:
+            x, y = self._ground
             seen = np.isfinite(x)
             position = np.full(seen.shape, -1, np.intp)
             position[seen] = np.arange(np.count_nonzero(seen))
             self._view = (seen, panel.surface_sampler(x[seen], y[seen]), position)
-            self._view_key = key
         return self._view
+
+    def _ground_points(self, panel, T_world_camera):
+        """Return True when the view is new: the pixels' ground points (x, y) were cast."""
+        key = (np.asarray(T_world_camera, dtype=np.float64).tobytes(), id(panel),
+               panel.placement)
+        if key == self._view_key:
+            return False
+        self._ground = self._renderer.ground_points(T_world_camera)
+        self._view_key = key
+        self._view = None
+        return True
 
     def image(self, panel, T_world_camera, rng=None):
         """
         Return the 16UC1 centikelvin read-out (H, W) as uint16.
 
-        What ``celsius_to_centikelvin(temperatures(...))`` gives, in one compiled pass
-        (``kernels.thermal_counts``).
+        What ``celsius_to_centikelvin(temperatures(...))`` gives, in one compiled pass: at a
+        new view from the pixels' ground points (``kernels.thermal_counts_at``), at a view
+        seen before through its kept sampler (``kernels.thermal_counts``).
         """
-        _, sampler, position = self._seen(panel, T_world_camera)
-        surface, far = sampler.surface()
         s = self.settings
         noisy = s.noise_sigma > 0.0
+        ambient = float(panel.wood.ambient)
+        sigma = float(s.noise_sigma) if noisy else 0.0
+        out = np.empty((self.camera.height, self.camera.width), np.uint16)
+        if self._ground_points(panel, T_world_camera):
+            surface, far = panel.surface_rise()
+            noise = self._noise.draw(rng) if noisy else self._no_noise
+            x, y = self._ground
+            bounds = np.array([panel.x_edges[0], panel.x_edges[-1], panel.y_edges[0],
+                               panel.y_edges[-1]])
+            thermal_counts_at(x, y, panel.x_centres, panel.y_centres, bounds, surface, far,
+                              ambient, noise, sigma, float(s.floor), float(s.cap), out)
+            return out
+        _, sampler, position = self._seen(panel, T_world_camera)
+        surface, far = sampler.surface()
         noise = self._noise.draw(rng) if noisy else self._no_noise
-        out = np.empty(position.shape, np.uint16)
         thermal_counts(position, sampler.corner, sampler.columns, sampler.wx, sampler.wy,
-                       sampler.inside, surface, far, float(panel.wood.ambient), noise,
-                       float(s.noise_sigma) if noisy else 0.0, float(s.floor), float(s.cap),
-                       out)
+                       sampler.inside, surface, far, ambient, noise, sigma, float(s.floor),
+                       float(s.cap), out)
         return out
 
 

@@ -462,3 +462,49 @@ def carried_points(points, slopes, shift_x, shift_y, shift_z, out):
     for p in range(points.shape[0]):
         out[p, 0] = points[p, 0] + shift_x - shift_z * slopes[p, 0]
         out[p, 1] = points[p, 1] + shift_y - shift_z * slopes[p, 1]
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def _axis_weight(centres, value):
+    """Return (i0, weight of i0 + 1) as ``bilinear_weights_on_axis`` finds them."""
+    n = len(centres)
+    i = min(max(_first_at_or_above(centres, value, False) - 1, 0), n - 2)
+    w = (value - centres[i]) / (centres[i + 1] - centres[i])
+    return i, min(max(w, 0.0), 1.0)
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def thermal_counts_at(x, y, x_centres, y_centres, bounds, surface, far, ambient, noise,
+                      sigma, floor, cap, out):
+    """
+    Fill `out` (H, W) uint16 as ``thermal_counts`` does, from each pixel's ground point.
+
+    x, y (H, W) where each pixel's ray meets the panel (NaN: never): the interpolation
+    weights are found per pixel by binary search on the patch's centres (a camera that
+    moves gets a new view every frame: no sampler worth keeping), `bounds` = (x_min,
+    x_max, y_min, y_max) of the patch. The same arithmetic as the sampler and
+    ``thermal_counts``.
+    """
+    height, width = x.shape
+    columns = len(x_centres)
+    for r in range(height):
+        for c in range(width):
+            px, py = x[r, c], y[r, c]
+            value = ambient
+            if px == px:
+                if (px >= bounds[0] and px <= bounds[1] and py >= bounds[2]
+                        and py <= bounds[3]):
+                    ix, wx = _axis_weight(x_centres, px)
+                    iy, wy = _axis_weight(y_centres, py)
+                    k = iy * columns + ix
+                    low_x, low_y = 1 - wx, 1 - wy
+                    rise = (low_y * (low_x * surface[k] + wx * surface[k + 1])
+                            + wy * (low_x * surface[k + columns]
+                                    + wx * surface[k + columns + 1]))
+                else:
+                    rise = far
+                value = ambient + rise
+            value = value + sigma * noise[r, c]
+            value = min(max(value, floor), cap)
+            counts = np.rint((value + 273.15) * 100.0)
+            out[r, c] = np.uint16(min(max(counts, 0.0), 65535.0))

@@ -492,6 +492,10 @@ class WoodPanel:
                   & (y >= self.y_edges[0]) & (y <= self.y_edges[-1]))
         return self.wood.ambient + np.where(inside, value, self.far_field[0])
 
+    def surface_rise(self):
+        """Return the surface rise of the patch's columns (flat, K) and of the far field."""
+        return np.ascontiguousarray(self._surface).reshape(-1), float(self.far_field[0])
+
     def surface_sampler(self, x, y):
         """
         Return a SurfaceSampler: sampler() -> the surface temperature at world points (x, y).
@@ -749,7 +753,7 @@ class SurfaceSampler:
         panel = self._panel
         if panel.placement != self._placement:
             raise RuntimeError('the patch moved: make a new surface_sampler')
-        return np.ascontiguousarray(panel._surface).reshape(-1), float(panel.far_field[0])
+        return panel.surface_rise()
 
     def __call__(self):
         """Return the surface temperature at the points now [degC]."""
