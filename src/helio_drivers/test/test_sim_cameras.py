@@ -7,6 +7,7 @@ import cv2
 from helio_drivers.sim.cameras import (celsius_to_centikelvin, centikelvin_to_celsius,
                                        NoisyReadOut, RgbCamera, RgbSettings, ThermalCamera,
                                        ThermalSettings)
+from helio_drivers.sim.kernels import bin_on_raster
 from helio_drivers.sim.wood import WoodPanel
 from helio_optics.geometry import (intersect_plane, invert_transform, look_at,
                                    transform_points, transform_vectors)
@@ -302,6 +303,23 @@ def test_compiled_table_read_out_equals_the_numpy_and_opencv_passes_it_replaced(
     part = light[5:30, 7:50]    # a part of a frame (not contiguous)
     level, _ = read_out.prepare(part, scale[5:30, 7:50])
     assert np.array_equal(level, read_out.prepare(part.copy(), scale[5:30, 7:50].copy())[0])
+
+
+def test_rays_binned_on_the_raster_window_equal_numpys_histogram():
+    rng = np.random.default_rng(12)
+    points = rng.normal(0.07, 0.004, (20000, 2))
+    points[:3] = np.nan
+    power = rng.random(20000)
+    origin, pixel, r0, c0, shape = (-0.04, -0.04), 2e-4, 520, 530, (60, 70)
+    binned = np.zeros(shape)
+    bin_on_raster(points, power, origin[0], origin[1], pixel, c0, r0, binned)
+    x_edges = origin[0] + (c0 + np.arange(shape[1] + 1)) * pixel
+    y_edges = origin[1] + (r0 + np.arange(shape[0] + 1)) * pixel
+    keep = np.all(np.isfinite(points), axis=1)
+    expected, _, _ = np.histogram2d(points[keep, 1], points[keep, 0], bins=(y_edges, x_edges),
+                                    weights=power[keep])
+    assert binned.sum() > 0.1 * power.sum()
+    assert np.allclose(binned, expected, rtol=1e-12, atol=1e-12)
 
 
 def test_ground_light_by_homography_equals_casting_every_pixel_ray():

@@ -508,3 +508,23 @@ def thermal_counts_at(x, y, x_centres, y_centres, bounds, surface, far, ambient,
             value = min(max(value, floor), cap)
             counts = np.rint((value + 273.15) * 100.0)
             out[r, c] = np.uint16(min(max(counts, 0.0), 65535.0))
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def bin_on_raster(points, power, x0, y0, pixel_size, c0, r0, out):
+    """
+    Add the rays' `power` to the raster pixels (rows from y_min) of window `out` (h, w).
+
+    Pixel (row, col) of the panel raster whose corner is (x0, y0) holds the rays with
+    floor((x - x0) / pixel_size) = col and the same for y; `out` starts at (r0, c0).
+    Rays outside the window (or NaN) are left out.
+    """
+    height, width = out.shape
+    for p in range(points.shape[0]):
+        column = np.floor((points[p, 0] - x0) / pixel_size)
+        row = np.floor((points[p, 1] - y0) / pixel_size)
+        if column == column and row == row:
+            column = int(column) - c0
+            row = int(row) - r0
+            if column >= 0 and column < width and row >= 0 and row < height:
+                out[row, column] += power[p]
