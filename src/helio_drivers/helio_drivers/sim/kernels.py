@@ -528,3 +528,18 @@ def bin_on_raster(points, power, x0, y0, pixel_size, c0, r0, out):
             row = int(row) - r0
             if column >= 0 and column < width and row >= 0 and row < height:
                 out[row, column] += power[p]
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def char_canvas(char, out):
+    """
+    Fill `out` uint8 (rows from y_max) with rint(255 (1 - chi)) of `char` (rows from y_min).
+
+    ``SimWorld.canvas_image``'s flip, scale, rounding and cast in one pass (a 1000 x 1000
+    raster: four whole-raster numpy passes took ~5 ms).
+    """
+    rows, cols = char.shape
+    for r in range(rows):
+        source = rows - 1 - r
+        for c in range(cols):
+            out[r, c] = np.uint8(np.rint(255.0 * (1.0 - char[source, c])))

@@ -24,6 +24,7 @@ from helio_drivers.sim.cameras import (light_window, RgbCamera, RgbSettings, The
                                        ThermalSettings)
 from helio_drivers.sim.clock import SimClock
 from helio_drivers.sim.flux import irradiance_on_cells, lens_pose_in_world, LensFlux
+from helio_drivers.sim.kernels import char_canvas
 from helio_drivers.sim.memory import keep_freed_memory
 from helio_drivers.sim.sun import CloudCover, RandomClouds, Sun
 from helio_drivers.sim.wood import GridParameters, WoodPanel, WoodParameters
@@ -356,7 +357,9 @@ class SimWorld:
     # ------------------------------------------------------------------ canvas
     def canvas_image(self):
         """Return the char map as a top-view mono8 image (255 bare, 0 char; row 0 at y_max)."""
-        return np.flipud(np.rint(255.0 * (1.0 - self.panel.char))).astype(np.uint8)
+        image = np.empty(self.panel.char.shape, np.uint8)
+        char_canvas(self.panel.char, image)
+        return image
 
     def canvas_picture(self):
         """
