@@ -132,7 +132,7 @@ class LensFlux:
 
     def __init__(self, lens=None, rays=30000, seed=0, bands=DEFAULT_BANDS,
                  move_tolerance=2e-5, angle_tolerance=5e-4, beam_spread=0.0,
-                 moving_rays=None):
+                 moving_rays=None, moving_angle_tolerance=5e-3):
         """
         Trace `rays` samples of `lens` (LensParameters, design index) in spectral `bands`.
 
@@ -145,7 +145,14 @@ class LensFlux:
         every ray (per axis): the facet slope and profile errors of a real moulded lens,
         convolved with the sun's disk as solar ray tracers do. The map is re-traced when
         the lens axis or sun ray turned more than `angle_tolerance` [rad] and carried along
-        with the lens (exactly) when it moved more than `move_tolerance` [m].
+        with the lens (exactly) when it moved more than `move_tolerance` [m]. While the lens
+        keeps moving its fewer rays are carried along while it turned by up to
+        `moving_angle_tolerance` [rad] (the emulated arm and servos do not reach their
+        targets together: the servos jump, the arm's joints ramp, so the lens wobbles by a
+        few mrad in a move between dots): a turn of 5 mrad moves the spot's centre by a
+        few um (a 40th of a fine cell) and changes its map on 0.2 mm cells by 1.5 % (L1,
+        the sun on the lens axis) to 6 % (45 mrad off it), under half the moving map's own
+        sampling noise (16 %; tested).
         """
         self.lens = lens or LensParameters()
         if rays < 100:
@@ -172,6 +179,7 @@ class LensFlux:
         self.moving_stride = stride
         self.move_tolerance = move_tolerance
         self.angle_tolerance = angle_tolerance
+        self.moving_angle_tolerance = max(float(moving_angle_tolerance), angle_tolerance)
         self._field = None
         self._key = None
         self._traced = None
@@ -205,7 +213,8 @@ class LensFlux:
             T_traced, s_traced = traced.key
             turned = math.acos(np.clip(T[:3, 2] @ T_traced[:3, 2], -1.0, 1.0))
             sun_turned = math.acos(np.clip(s0 @ s_traced, -1.0, 1.0))
-            if turned <= self.angle_tolerance and sun_turned <= self.angle_tolerance:
+            tolerance = self.moving_angle_tolerance if sparse else self.angle_tolerance
+            if turned <= tolerance and sun_turned <= tolerance:
                 moved = np.linalg.norm(T[:3, 3] - self._key[0][:3, 3])
                 if moved <= self.move_tolerance and (moving or not self._field_is_sparse):
                     return self._field
@@ -267,20 +276,29 @@ class _TracedRays:
         self._origin = key[0][:3, 3].copy()
         self._common = {'direct': direct, 'lens_axis': lens_axis,
                         'aperture_radius': aperture_radius, 'sun_ray': sun_ray}
+        self._trace = (hit, points, directions, power, subset, stride, incident * transmission,
+                       incident)
         self._sets = {}
-        for name, chosen in (('all', hit), ('moving', hit & subset[None, :])):
+
+    def _set(self, name):
+        """Return (points, slopes, power, TIR share) of the rays of set `name`, once."""
+        if self.sparse:
+            name = 'all'     # a sparse trace holds the moving lens's rays only
+        if name not in self._sets:
+            hit, points, directions, power, subset, stride, passed, incident = self._trace
+            chosen = hit if name == 'all' else hit & subset[None, :]
             # the rays that reach the panel, band after band (as B separate traces gave them)
-            scale = 1.0 if name == 'all' else float(stride)
-            chosen_power = power[chosen] * scale
-            lost = incident * transmission - float(chosen_power.sum())
+            chosen_power = power[chosen] * (1.0 if name == 'all' else float(stride))
+            lost = passed - float(chosen_power.sum())
             leaving = directions[chosen]
             self._sets[name] = (np.ascontiguousarray(points[chosen]),
                                 leaving[:, :2] / leaving[:, 2:3], chosen_power,
                                 lost / incident if incident > 0.0 else 0.0)
+        return self._sets[name]
 
     def carried(self, lens_centre, sparse):
         """Return the FluxField of these rays with the lens moved to `lens_centre` (world)."""
-        points, slopes, power, tir_fraction = self._sets['moving' if sparse else 'all']
+        points, slopes, power, tir_fraction = self._set('moving' if sparse else 'all')
         shift = np.asarray(lens_centre, dtype=float) - self._origin
         if np.any(shift):
             moved = np.empty_like(points)
