@@ -203,6 +203,8 @@ class SimWorld:
         self._pose = None
         self._lens_pose_key = None
         self._T_world_lens = None
+        self._camera_pose_key = None
+        self._camera_poses = None
         self.steps = 0
         self._refresh()
 
@@ -240,7 +242,11 @@ class SimWorld:
     def camera_poses(self):
         """Return (T_world_rgb, T_world_thermal) at the present joints."""
         pose = self.pose()
-        return (self.T_world_robot @ pose.T_robot_rgb, self.T_world_robot @ pose.T_robot_thermal)
+        if self._camera_pose_key != self._pose_key:     # once per pose
+            self._camera_poses = (self.T_world_robot @ pose.T_robot_rgb,
+                                  self.T_world_robot @ pose.T_robot_thermal)
+            self._camera_pose_key = self._pose_key
+        return tuple(T.copy() for T in self._camera_poses)
 
     def sun_ray_world(self):
         """Return the true sun ray s0 in the world frame now (for tests and the demo only)."""
