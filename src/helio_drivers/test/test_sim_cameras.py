@@ -7,6 +7,7 @@ import cv2
 from helio_drivers.sim.cameras import (celsius_to_centikelvin, centikelvin_to_celsius,
                                        NoisyReadOut, RgbCamera, RgbSettings, ThermalCamera,
                                        ThermalSettings)
+from helio_drivers.sim.kernels import bin_on_raster
 from helio_drivers.sim.wood import WoodPanel
 from helio_optics.geometry import (intersect_plane, invert_transform, look_at,
                                    transform_points, transform_vectors)
@@ -65,6 +66,23 @@ def test_thermal_frames_kept_between_steps_and_re_centres_equal_a_fresh_cast():
     moved = look_at([-0.02, 0.01, 0.09], [0.01, 0.005, 0.0], up=(1.0, 0.0, 0.0))
     fresh = ThermalCamera(settings).temperatures(panel, moved)
     assert np.array_equal(kept.temperatures(panel, moved), fresh)
+
+
+@pytest.mark.parametrize('sigma', [0.0, 0.2])
+def test_thermal_image_in_one_pass_equals_the_temperatures_encoded(sigma):
+    # the compiled read-out against temperatures() then celsius_to_centikelvin, the same
+    # noise drawn for both; a view half off the patch (far field) and above its cap
+    panel = heated_panel()
+    camera = ThermalCamera(ThermalSettings(noise_sigma=sigma))
+    for pose in (look_at([-0.03, 0.0, 0.09], [0.01, 0.005, 0.0], up=(1.0, 0.0, 0.0)),
+                 look_at([0.02, 0.05, 0.05], [0.06, 0.04, 0.0], up=(1.0, 0.0, 0.0))):
+        # a new view (ground points searched per pixel), then the kept one (its sampler)
+        counts = camera.image(panel, pose, np.random.default_rng(8))
+        kept = camera.image(panel, pose, np.random.default_rng(8))
+        expected = celsius_to_centikelvin(camera.temperatures(panel, pose,
+                                                              np.random.default_rng(8)))
+        assert np.array_equal(counts, expected) and np.array_equal(kept, expected)
+    assert centikelvin_to_celsius(counts.min()) < 30.0
 
 
 def test_thermal_noise_differs_frame_to_frame():
@@ -252,6 +270,56 @@ def test_linearised_read_out_has_the_exact_read_outs_mean_and_noise_per_level():
     assert np.all(fast[:, :, saturated] == 255) and np.all(exact[:, :, saturated] == 255)
     # no two frames alike
     assert np.abs(fast[0] - fast[1]).mean() > 0.5
+
+
+def test_compiled_table_read_out_equals_the_numpy_and_opencv_passes_it_replaced():
+    # the tables indexed by light x a per-pixel scale (the vignetting), written as numpy
+    # passes: product, clip, + 0.5, cast; the frame as OpenCV's multiply and add of
+    # level[index] and gain[index] x noise; light from below 0 to far above full scale
+    settings = RgbSettings(width=96, height=64)
+    camera = RgbCamera((-0.04, 0.06, -0.04, 0.06), 2e-4, settings)
+    read_out = NoisyReadOut(camera._webcam, (settings.height, settings.width, 3), seed=3)
+    rng = np.random.default_rng(5)
+    light = rng.uniform(-0.1, 1.5, (settings.height, settings.width, 3)).astype(np.float32)
+    light[0, 0] = np.nan
+    scale = (rng.uniform(0.8, 1.0, light.shape) * read_out.index_scale()).astype(np.float32)
+    for per_pixel in (scale, None):
+        index = (np.multiply(light, per_pixel, dtype=np.float32) if per_pixel is not None
+                 else light * np.float32(read_out.index_scale()))
+        index = np.nan_to_num(index, nan=0.0)
+        np.clip(index, 0.0, float(read_out._last), out=index)
+        index = (index + np.float32(0.5)).astype(np.intp)
+        prepared = read_out.prepare(light, per_pixel)
+        assert np.array_equal(prepared[0], read_out._level[index])
+        assert np.array_equal(prepared[1], read_out._gain[index])
+        # the same noise offset drawn for both (a generator of the same seed)
+        frame = read_out.expose(prepared, np.random.default_rng(9))
+        k, offset = (int(v) for v in np.random.default_rng(9).integers(
+            0, (read_out.FRAMES, read_out._slack + 1)))
+        noise = read_out._bank[k, offset:offset + light.size].reshape(light.shape)
+        product = cv2.multiply(noise, read_out._gain[index], dtype=cv2.CV_32F)
+        assert np.array_equal(frame, cv2.add(read_out._level[index], product,
+                                             dtype=cv2.CV_8U))
+    part = light[5:30, 7:50]    # a part of a frame (not contiguous)
+    level, _ = read_out.prepare(part, scale[5:30, 7:50])
+    assert np.array_equal(level, read_out.prepare(part.copy(), scale[5:30, 7:50].copy())[0])
+
+
+def test_rays_binned_on_the_raster_window_equal_numpys_histogram():
+    rng = np.random.default_rng(12)
+    points = rng.normal(0.07, 0.004, (20000, 2))
+    points[:3] = np.nan
+    power = rng.random(20000)
+    origin, pixel, r0, c0, shape = (-0.04, -0.04), 2e-4, 520, 530, (60, 70)
+    binned = np.zeros(shape)
+    bin_on_raster(points, power, origin[0], origin[1], pixel, c0, r0, binned)
+    x_edges = origin[0] + (c0 + np.arange(shape[1] + 1)) * pixel
+    y_edges = origin[1] + (r0 + np.arange(shape[0] + 1)) * pixel
+    keep = np.all(np.isfinite(points), axis=1)
+    expected, _, _ = np.histogram2d(points[keep, 1], points[keep, 0], bins=(y_edges, x_edges),
+                                    weights=power[keep])
+    assert binned.sum() > 0.1 * power.sum()
+    assert np.allclose(binned, expected, rtol=1e-12, atol=1e-12)
 
 
 def test_ground_light_by_homography_equals_casting_every_pixel_ray():

@@ -2,7 +2,7 @@
 
 import math
 
-from helio_drivers.sim.wood import GridParameters, WoodPanel, WoodParameters
+from helio_drivers.sim.wood import bilinear_weights, GridParameters, WoodPanel, WoodParameters
 import numpy as np
 import pytest
 
@@ -307,3 +307,18 @@ def test_evaporated_heat_equals_the_latent_heat_of_the_water_lost():
     assert panel.moisture.min() == 0.0       # the spot dried out, so it could get hotter
     assert panel.surface_temperature().max() > wood.pyrolysis_temperature
     assert panel.ledger.evaporated == pytest.approx(wood.latent_heat * water_lost, rel=1e-9)
+
+
+def test_bilinear_weights_equal_numpys_search_and_clip():
+    # the compiled search against numpy's searchsorted on the patch's uneven centres,
+    # coordinates inside, on centres, beyond both ends
+    panel = WoodPanel(extent=(-0.03, 0.03, -0.03, 0.03))
+    centres = panel.x_centres
+    rng = np.random.default_rng(11)
+    x = np.concatenate([rng.uniform(centres[0] - 0.01, centres[-1] + 0.01, 5000),
+                        centres, [panel.x_edges[0], panel.x_edges[-1]]])
+    index, weight = bilinear_weights(centres, x)
+    expected = np.clip(np.searchsorted(centres, x) - 1, 0, len(centres) - 2)
+    span = centres[expected + 1] - centres[expected]
+    assert np.array_equal(index, expected)
+    assert np.array_equal(weight, np.clip((x - centres[expected]) / span, 0.0, 1.0))

@@ -59,6 +59,9 @@ def test_a_held_focus_chars_a_dot_written_to_the_canvas_outputs(tmp_path):
     png, csv = world.write_outputs(str(tmp_path))
     mask = cv2.imread(str(tmp_path / 'canvas_mask.png'), cv2.IMREAD_UNCHANGED)
     assert np.array_equal(mask, world.canvas_image())
+    # the compiled canvas against the char raster flipped, scaled and rounded by numpy
+    expected = np.flipud(np.rint(255.0 * (1.0 - world.panel.char))).astype(np.uint8)
+    assert np.array_equal(world.canvas_image(), expected) and expected.min() < 128
     rows = np.loadtxt(csv, delimiter=',', comments='#', skiprows=2, ndmin=2)
     assert rows.shape == (1, 4)
     x, y, diameter, _ = rows[0]

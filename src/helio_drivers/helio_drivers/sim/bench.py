@@ -22,14 +22,17 @@ aiming with the world's TRUE sun, ``truth.py``):
 
 Node (``--skip-node`` leaves it out): ``python -m helio_drivers.sim.world_node`` as its own
 process at ``real_time_factor`` 0 with this process subscribed to both cameras and
-``/clock``; this process drives the emulated Dobot and Maestro over their pseudo-terminals
-as the drivers would. ``sim_node_heating_*`` holds the lens on a dot, ``sim_node_moving_*``
+``/clock``, both with the graph's Fast DDS profile for camera images
+(``fastdds_large_images.xml``, as ``helio_control.bringup`` starts every node); this
+process drives the emulated Dobot and Maestro over their pseudo-terminals as the drivers
+would. ``sim_node_heating_*`` holds the lens on a dot, ``sim_node_moving_*``
 commands the next of two dots as soon as the last move ended; CPU is the node process's
 (``/proc``), and ``sim_node_*_rgb_hz`` / ``_thermal_hz`` count the frames received per
 simulated second.
 
 Per-part costs (``*_ms_median``, CPU time): ``sim_heat_step``, ``sim_flux_trace``
-(re-trace after a move), ``sim_flux_bin``, ``sim_thermal_frame``, ``sim_rgb_frame``
+(re-trace after the sun turned), ``sim_flux_carry`` (the moving lens's rays carried along
+after a move without turning), ``sim_flux_bin``, ``sim_thermal_frame``, ``sim_rgb_frame``
 (unchanged scene), ``sim_rgb_frame_heating`` (the char changing between frames),
 ``sim_rgb_frame_moving`` (a new pose every frame), ``sim_world_step``.
 
@@ -51,6 +54,7 @@ from helio_drivers.sim.flux import irradiance_on_cells, lens_pose_in_world
 from helio_drivers.sim.truth import true_sun_focus_joints
 from helio_drivers.sim.world import SimSettings, SimWorld
 from helio_optics.bench_report import add_json_option, median_call_ms, report
+from helio_optics.config_files import config_path
 from helio_optics.node_kit.process_tuning import single_threaded_numerics
 from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
 from helio_optics.rig_kinematics import RigParameters
@@ -63,6 +67,7 @@ SPACING = 0.004       # [m] between dots
 D_LP = 0.082          # heating distance [m]
 RETREAT = 0.03        # [m]
 N_P_TARGET = 30
+DDS_PROFILE_ENV = 'FASTRTPS_DEFAULT_PROFILES_FILE'
 
 
 def _rig():
@@ -254,6 +259,12 @@ class NodeRun:
                    '-p', f'servo_port:={self.ports[1]}']
         if rig_file:
             command += ['-p', f'rig_file:={rig_file}']
+        # the graph's Fast DDS profile for camera images, as helio_control.bringup gives
+        # every node (and this probe: set before its context starts)
+        profile = config_path('fastdds_large_images.xml', required=False)
+        if profile and DDS_PROFILE_ENV not in os.environ:
+            os.environ[DDS_PROFILE_ENV] = profile
+        self.dds_profile = os.environ.get(DDS_PROFILE_ENV, '')
         self.process = subprocess.Popen(command, stdout=subprocess.DEVNULL,
                                         stderr=subprocess.DEVNULL)
         self.context = rclpy.context.Context()
@@ -349,6 +360,7 @@ def bench_node(rig_file, wall_seconds, busy):
     figures = {}
     with tempfile.TemporaryDirectory(prefix='helio_sim_bench_') as directory:
         run = NodeRun(rig_file, directory)
+        print(f'node: Fast DDS profile {run.dds_profile or "(none: the defaults)"}')
         try:
             focus = [true_sun_focus_joints(run.world, (DOT[0] + SPACING * k, DOT[1]), D_LP)
                      for k in range(2)]
@@ -400,8 +412,15 @@ def bench_costs(rig, repeats=30):
                                     world, (DOT[0], DOT[1] + 1e-3 * k), D_LP)).T_robot_lens)
              for k in range(repeats)]
     fields = []
+    # the sun turned 1 mrad more each time: a re-trace (a lens that only moved is carried)
+    suns = [s0 + np.array([1e-3 * (k + 1), 0.0, 0.0]) for k in range(repeats)]
     figures['sim_flux_trace_ms_median'] = _cpu_ms(
-        lambda: fields.append(world.flux.field(poses[len(fields)], s0)), repeats)
+        lambda: fields.append(world.flux.field(poses[len(fields)], suns[len(fields)])),
+        repeats)
+    carried = []
+    figures['sim_flux_carry_ms_median'] = _cpu_ms(
+        lambda: carried.append(world.flux.field(poses[len(carried)], suns[-1], moving=True)),
+        repeats)
     figures['sim_flux_bin_ms_median'] = _cpu_ms(
         lambda: irradiance_on_cells(fields[-1], world.panel.x_edges, world.panel.y_edges,
                                     900.0), repeats)

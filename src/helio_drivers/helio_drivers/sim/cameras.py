@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import math
 
 import cv2
+from helio_drivers.sim.kernels import (bin_on_raster, noisy_read_out, thermal_counts,
+                                       thermal_counts_at, tone_table_read_out)
 from helio_optics.geometry import PinholeCamera
 from helio_optics.ground_render import (decode_srgb8, GroundRenderer, GroundTexture,
                                         jpeg_round_trip, linear_to_srgb,
@@ -110,11 +112,13 @@ class ThermalCamera:
         self._renderer = GroundRenderer(self.camera, supersample=1)
         self._view_key = None      # (pose, panel, placement) of the kept view
         self._view = None          # (pixels seeing the panel, their surface sampler)
+        self._ground = None        # the pixels' ground points (x, y) of the kept view
         self._noise = NoiseBank((self.camera.height, self.camera.width), seed)
+        self._no_noise = np.zeros((self.camera.height, self.camera.width))
 
     def temperatures(self, panel, T_world_camera, rng=None):
         """Return the read-out [degC] per pixel: the field at pixel centres, noise, cap."""
-        seen, sample = self._seen(panel, T_world_camera)
+        seen, sample, _ = self._seen(panel, T_world_camera)
         field = np.full(seen.shape, panel.wood.ambient)
         field[seen] = sample()
         if self.settings.noise_sigma > 0.0:
@@ -123,23 +127,60 @@ class ThermalCamera:
 
     def _seen(self, panel, T_world_camera):
         """
-        Return (mask of the pixels that see the panel, sampler of their surface points).
+        Return (pixels that see the panel, their surface sampler, each pixel's point or -1).
 
         Kept while the camera and the heat patch stand still (they do while a dot heats):
         a frame then costs the gather of the surface field, not the ray casts.
         """
-        key = (np.asarray(T_world_camera, dtype=np.float64).tobytes(), id(panel),
-               panel.placement)
-        if key != self._view_key:
-            x, y = self._renderer.ground_points(T_world_camera)
+        self._ground_points(panel, T_world_camera)
+        if self._view is None:
+            x, y = self._ground
             seen = np.isfinite(x)
-            self._view = (seen, panel.surface_sampler(x[seen], y[seen]))
-            self._view_key = key
+            position = np.full(seen.shape, -1, np.intp)
+            position[seen] = np.arange(np.count_nonzero(seen))
+            self._view = (seen, panel.surface_sampler(x[seen], y[seen]), position)
         return self._view
 
+    def _ground_points(self, panel, T_world_camera):
+        """Return True when the view is new: the pixels' ground points (x, y) were cast."""
+        key = (np.asarray(T_world_camera, dtype=np.float64).tobytes(), id(panel),
+               panel.placement)
+        if key == self._view_key:
+            return False
+        self._ground = self._renderer.ground_points(T_world_camera)
+        self._view_key = key
+        self._view = None
+        return True
+
     def image(self, panel, T_world_camera, rng=None):
-        """Return the 16UC1 centikelvin read-out (H, W) as uint16."""
-        return celsius_to_centikelvin(self.temperatures(panel, T_world_camera, rng))
+        """
+        Return the 16UC1 centikelvin read-out (H, W) as uint16.
+
+        What ``celsius_to_centikelvin(temperatures(...))`` gives, in one compiled pass: at a
+        new view from the pixels' ground points (``kernels.thermal_counts_at``), at a view
+        seen before through its kept sampler (``kernels.thermal_counts``).
+        """
+        s = self.settings
+        noisy = s.noise_sigma > 0.0
+        ambient = float(panel.wood.ambient)
+        sigma = float(s.noise_sigma) if noisy else 0.0
+        out = np.empty((self.camera.height, self.camera.width), np.uint16)
+        if self._ground_points(panel, T_world_camera):
+            surface, far = panel.surface_rise()
+            noise = self._noise.draw(rng) if noisy else self._no_noise
+            x, y = self._ground
+            bounds = np.array([panel.x_edges[0], panel.x_edges[-1], panel.y_edges[0],
+                               panel.y_edges[-1]])
+            thermal_counts_at(x, y, panel.x_centres, panel.y_centres, bounds, surface, far,
+                              ambient, noise, sigma, float(s.floor), float(s.cap), out)
+            return out
+        _, sampler, position = self._seen(panel, T_world_camera)
+        surface, far = sampler.surface()
+        noise = self._noise.draw(rng) if noisy else self._no_noise
+        thermal_counts(position, sampler.corner, sampler.columns, sampler.wx, sampler.wy,
+                       sampler.inside, surface, far, ambient, noise, sigma, float(s.floor),
+                       float(s.cap), out)
+        return out
 
 
 class NoiseBank:
@@ -177,9 +218,12 @@ class NoisyReadOut:
     frame at 640 x 480, half of it the look-up). Here the noise-free level of each pixel in
     8-bit output units, T(c), and the output's noise per unit of the sensor's noise,
     T'(c) sigma(c), are worked out once per change of the light; a frame is then
-    round(T(c) + T''(c) sigma^2 / 2 + T'(c) sigma(c) z), saturated to 0..255: two OpenCV
-    passes (0.6 ms). That is the exact read-out's mean to second order and its standard
-    deviation to first order in the noise (the test compares them level by level: within
+    round(T(c) + T''(c) sigma^2 / 2 + T'(c) sigma(c) z), saturated to 0..255: the tables
+    are read once per change of the light (``kernels.tone_table_read_out``), a frame is one
+    vectorised pass over the level, the gain and the noise (``kernels.noisy_read_out``,
+    0.13 ms; a table look-up per element in the frame's pass cost 0.9 ms). That is the
+    exact read-out's mean to second order and its standard deviation to first order in the
+    noise (the test compares them level by level: within
     a third of a level, half a level under 1 % of full scale; the 10-bit ADC's step, a
     fraction of the noise, is not reproduced). Where the light is above full scale the
     pixel reads 255 whatever the noise (the exact read-out dips half a level below 255
@@ -210,6 +254,8 @@ class NoisyReadOut:
         self._level = (curve + bend * sigma * sigma).astype(np.float32)
         self._gain = (slope * sigma).astype(np.float32)
         self._last = len(curve) - 1
+        self._no_scale = np.zeros(0, np.float32)
+        self._index = None
         self.shape = tuple(shape)
         # flat frames a few rows longer than the image: a crop at any offset is contiguous
         self._size = int(np.prod(self.shape))
@@ -218,7 +264,6 @@ class NoisyReadOut:
             (self.FRAMES, self._size + self._slack), dtype=np.float32)
         self._bank = np.clip(np.rint(draw * np.float32(self.NOISE_SCALE)),
                              -127, 127).astype(np.int8)
-        self._product = None
 
     def index_scale(self):
         """Return the table steps per unit of linear light (for `prepare`'s `scale`)."""
@@ -231,26 +276,29 @@ class NoisyReadOut:
         `scale`: table steps per unit of light per pixel (`index_scale` x a gain the light
         still needs, such as the vignetting: one pass for both), or None.
         """
-        light = np.asarray(light, dtype=np.float32)
+        light = np.ascontiguousarray(light, dtype=np.float32)
         if scale is None:
-            index = light * np.float32(self.index_scale())
+            scale = self._no_scale
         else:
-            index = np.multiply(light, scale, dtype=np.float32)
-        np.clip(index, 0.0, float(self._last), out=index)
-        index += np.float32(0.5)
-        index = index.astype(np.intp)
-        return np.take(self._level, index), np.take(self._gain, index)
+            scale = np.ascontiguousarray(np.broadcast_to(scale, light.shape),
+                                         dtype=np.float32).reshape(-1)
+        level = np.empty(light.shape, np.float32)
+        gain = np.empty(light.shape, np.float32)
+        if self._index is None or self._index.size < light.size:
+            self._index = np.empty(light.size, np.int32)     # scratch, reused
+        tone_table_read_out(light.reshape(-1), scale, np.float32(self.index_scale()),
+                            self._last, self._level, self._gain, level.reshape(-1),
+                            gain.reshape(-1), self._index)
+        return level, gain
 
     def expose(self, prepared, rng=None):
         """Return the 8-bit frame of (level, gain): noise from a random offset in the bank."""
-        level, gain = prepared
+        level, gain = (np.ascontiguousarray(part) for part in prepared)
         rng = np.random.default_rng() if rng is None else rng
         k, offset = (int(v) for v in rng.integers(0, (self.FRAMES, self._slack + 1)))
-        noise = self._bank[k, offset:offset + self._size].reshape(level.shape)
-        if self._product is None or self._product.shape != level.shape:
-            self._product = np.empty(level.shape, np.float32)   # reused frame after frame
-        cv2.multiply(noise, gain, dst=self._product, dtype=cv2.CV_32F)
-        image = cv2.add(level, self._product, dtype=cv2.CV_8U)
+        noise = self._bank[k, offset:offset + level.size]
+        image = np.empty(level.shape, np.uint8)
+        noisy_read_out(level.reshape(-1), gain.reshape(-1), noise, image.reshape(-1))
         quality = self._webcam.settings.jpeg_quality
         return jpeg_round_trip(image, quality) if quality > 0 else image
 
@@ -672,15 +720,12 @@ def light_window(field, shape, origin, pixel_size, window):
         return None
     xs = origin[0] + (np.arange(c0, c1) + 0.5) * pixel_size
     ys = origin[1] + (np.arange(r0, r1) + 0.5) * pixel_size
-    shadow = field.in_shadow(xs[None, :], ys[:, None])
-    # the rays' power binned per raster pixel (bincount: np.histogram2d's searches cost
-    # ~10 ms for 120 000 rays, this ~1 ms)
-    column = np.floor((field.points[:, 0] - origin[0]) / pixel_size).astype(np.int64) - c0
-    row = np.floor((field.points[:, 1] - origin[1]) / pixel_size).astype(np.int64) - r0
-    inside = (column >= 0) & (column < c1 - c0) & (row >= 0) & (row < r1 - r0)
-    binned = np.bincount(row[inside] * (c1 - c0) + column[inside],
-                         weights=field.power[inside],
-                         minlength=(r1 - r0) * (c1 - c0)).reshape(r1 - r0, c1 - c0)
+    shadow = field.in_shadow_grid(xs, ys)
+    # the rays' power binned per raster pixel (one compiled pass over the rays)
+    binned = np.zeros((r1 - r0, c1 - c0))
+    bin_on_raster(np.ascontiguousarray(field.points, dtype=float),
+                  np.ascontiguousarray(field.power, dtype=float), float(origin[0]),
+                  float(origin[1]), float(pixel_size), c0, r0, binned)
     concentrated = binned / (pixel_size * pixel_size) / max(field.direct, 1e-6)
     concentrated = cv2.GaussianBlur(concentrated.astype(np.float32), (0, 0), 0.7)
     lit = np.where(shadow, 0.0, 1.0) + concentrated

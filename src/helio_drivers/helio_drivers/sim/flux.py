@@ -14,12 +14,15 @@ the wood patch and divided by the cell areas: irradiance [W/m^2] on the panel.
 
 The light that misses the lens lands on the panel directly: DNI cos(incidence) everywhere
 except in the lens shadow (the aperture projected along the sun ray). The map is kept per
-unit DNI and re-traced only when the lens or the sun moved noticeably; a cloud just scales it.
+unit DNI and re-traced only when the lens or the sun turned noticeably (a lens that only moved
+carries its traced rays along, exactly); a cloud just scales it.
 """
 
 from dataclasses import dataclass, replace
 import math
 
+from helio_drivers.sim.kernels import (bin_points, carried_points, points_summary, shadow_grid,
+                                       shadow_samples)
 from helio_optics.geometry import invert_transform
 from helio_optics.lens import (area_samples, LensParameters, pmma_index, SOLAR_BANDS,
                                trace_bands)
@@ -45,11 +48,22 @@ class FluxField:
 
     def centroid(self):
         """Return the power-weighted centre of the concentrated spot (x, y) [m], or None."""
-        if not hasattr(self, '_centroid'):
-            total = float(self.power.sum())
-            self._centroid = (None if total <= 0.0 else
-                              (self.points * self.power[:, None]).sum(axis=0) / total)
-        return self._centroid
+        total, sx, sy = self._summary()[:3]
+        return None if total <= 0.0 else np.array([sx / total, sy / total])
+
+    def bounds(self):
+        """Return the rays' box (x_min, y_min), (x_max, y_max) [m], or None without rays."""
+        if not self.points.size:
+            return None
+        summary = self._summary()
+        return np.array(summary[3:5]), np.array(summary[5:7])
+
+    def _summary(self):
+        """Return (power, power-weighted x and y sums, box) of the rays, once per field."""
+        if not hasattr(self, '_sums'):
+            self._sums = points_summary(np.ascontiguousarray(self.points, dtype=float),
+                                        np.ascontiguousarray(self.power, dtype=float))
+        return self._sums
 
     def total_power(self):
         """Concentrated power on the panel per unit DNI [m^2]."""
@@ -66,21 +80,51 @@ class FluxField:
         """
         x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
         shape = np.broadcast_shapes(x.shape, y.shape)
-        towards_sun = -self.sun_ray
-        normal = self.lens_axis
-        denominator = float(towards_sun @ normal)
-        if abs(denominator) < 1e-9:
+        form = self._shadow_form()
+        if form is None:
             return np.zeros(shape, bool)
-        # offset at the lens plane of panel point p: Q (p - O), Q the oblique projector
-        projector = np.eye(3) - np.outer(towards_sun, normal) / denominator
-        a, b = projector[:, 0], projector[:, 1]
-        c = -projector @ self.lens_centre
-        radial2 = ((a @ a) * x * x + (2.0 * (a @ b)) * x * y + (b @ b) * y * y
-                   + (2.0 * (a @ c)) * x + (2.0 * (b @ c)) * y + (c @ c))
-        distance = (float(self.lens_centre @ normal) - normal[0] * x
-                    - normal[1] * y) / denominator
-        return np.broadcast_to((distance > 0.0) & (radial2 <= self.aperture_radius ** 2),
-                               shape)
+        aa, ab2, bb, ac2, bc2, cc, r2, d0, n0, n1, denominator = form
+        radial2 = aa * x * x + ab2 * x * y + bb * y * y + ac2 * x + bc2 * y + cc
+        distance = (d0 - n0 * x - n1 * y) / denominator
+        return np.broadcast_to((distance > 0.0) & (radial2 <= r2), shape)
+
+    def in_shadow_grid(self, xs, ys):
+        """
+        Return ``in_shadow(xs[None, :], ys[:, None])`` (len(ys), len(xs)) in one pass.
+
+        The same arithmetic compiled over the grid (``kernels.shadow_grid``).
+        """
+        xs = np.ascontiguousarray(xs, dtype=float)
+        ys = np.ascontiguousarray(ys, dtype=float)
+        out = np.zeros((len(ys), len(xs)), bool)
+        form = self._shadow_form()
+        if form is not None:
+            shadow_grid(xs, ys, form, out)
+        return out
+
+    def _shadow_form(self):
+        """
+        Return the coefficients of the shadow test (see ``in_shadow``), or None.
+
+        (aa, 2ab, bb, 2ac, 2bc, cc, r^2, d0, n0, n1, denominator); None when the sun ray
+        runs in the lens plane.
+        """
+        if not hasattr(self, '_form'):
+            towards_sun = -self.sun_ray
+            normal = self.lens_axis
+            denominator = float(towards_sun @ normal)
+            if abs(denominator) < 1e-9:
+                self._form = None
+                return None
+            # offset at the lens plane of panel point p: Q (p - O), Q the oblique projector
+            projector = np.eye(3) - np.outer(towards_sun, normal) / denominator
+            a, b = projector[:, 0], projector[:, 1]
+            c = -projector @ self.lens_centre
+            self._form = (float(a @ a), float(2.0 * (a @ b)), float(b @ b),
+                          float(2.0 * (a @ c)), float(2.0 * (b @ c)), float(c @ c),
+                          float(self.aperture_radius ** 2), float(self.lens_centre @ normal),
+                          float(normal[0]), float(normal[1]), denominator)
+        return self._form
 
 
 class LensFlux:
@@ -88,7 +132,7 @@ class LensFlux:
 
     def __init__(self, lens=None, rays=30000, seed=0, bands=DEFAULT_BANDS,
                  move_tolerance=2e-5, angle_tolerance=5e-4, beam_spread=0.0,
-                 moving_rays=None):
+                 moving_rays=None, moving_angle_tolerance=5e-3):
         """
         Trace `rays` samples of `lens` (LensParameters, design index) in spectral `bands`.
 
@@ -100,8 +144,15 @@ class LensFlux:
         `beam_spread` [rad] is the standard deviation of a Gaussian angular error added to
         every ray (per axis): the facet slope and profile errors of a real moulded lens,
         convolved with the sun's disk as solar ray tracers do. The map is re-traced when
-        the lens moved more than `move_tolerance` [m] or the lens axis or sun ray turned
-        more than `angle_tolerance` [rad].
+        the lens axis or sun ray turned more than `angle_tolerance` [rad] and carried along
+        with the lens (exactly) when it moved more than `move_tolerance` [m]. While the lens
+        keeps moving its fewer rays are carried along while it turned by up to
+        `moving_angle_tolerance` [rad] (the emulated arm and servos do not reach their
+        targets together: the servos jump, the arm's joints ramp, so the lens wobbles by a
+        few mrad in a move between dots): a turn of 5 mrad moves the spot's centre by a
+        few um (a 40th of a fine cell) and changes its map on 0.2 mm cells by 1.5 % (L1,
+        the sun on the lens axis) to 6 % (45 mrad off it), under half the moving map's own
+        sampling noise (16 %; tested).
         """
         self.lens = lens or LensParameters()
         if rays < 100:
@@ -128,57 +179,135 @@ class LensFlux:
         self.moving_stride = stride
         self.move_tolerance = move_tolerance
         self.angle_tolerance = angle_tolerance
+        self.moving_angle_tolerance = max(float(moving_angle_tolerance), angle_tolerance)
         self._field = None
         self._key = None
+        self._traced = None
+        self._asked = None     # the last pose and sun ray asked for, as given
         self._field_is_sparse = False
-        self.traces = 0
+        self.traces = 0     # traces done
+        self.fields = 0     # fields made (traced, or carried along with the lens)
 
     def field(self, T_world_lens, sun_ray_world, moving=False):
         """
-        Return the FluxField for a lens pose and sun ray (world), re-traced only if moved.
+        Return the FluxField for a lens pose and sun ray (world), re-traced only if turned.
 
-        With `moving` a re-trace uses the moving lens's fewer rays; a field traced so is
-        traced again in full as soon as it is asked for without `moving`.
+        A lens that moved without turning (its axis and the sun ray within
+        `angle_tolerance` of the traced ones: the rig keeps the lens's orientation while
+        the arm moves it) gets the traced rays carried along exactly (``_TracedRays``);
+        it is re-traced when either turned more. With `moving` the field holds the moving
+        lens's fewer rays (every ``moving_stride``-th sample); a field so made is made in
+        full again as soon as it is asked for without `moving`.
         """
         T = np.asarray(T_world_lens, dtype=float)
         s0 = np.asarray(sun_ray_world, dtype=float)
+        asked = self._asked
+        if (asked is not None and (moving or not self._field_is_sparse)
+                and np.array_equal(T, asked[0]) and np.array_equal(s0, asked[1])):
+            return self._field           # asked again for the same pose and sun (held still)
+        self._asked = (T.copy(), s0.copy())
         s0 = s0 / np.linalg.norm(s0)
-        if self._key is not None:
-            T_old, s_old = self._key
-            moved = np.linalg.norm(T[:3, 3] - T_old[:3, 3])
-            turned = math.acos(np.clip(T[:3, 2] @ T_old[:3, 2], -1.0, 1.0))
-            sun_turned = math.acos(np.clip(s0 @ s_old, -1.0, 1.0))
-            if (moved <= self.move_tolerance and turned <= self.angle_tolerance
-                    and sun_turned <= self.angle_tolerance
-                    and (moving or not self._field_is_sparse)):
-                return self._field
         sparse = moving and self.moving_stride > 1
-        self._field = self._trace(T, s0, self._moving_samples if sparse else self._samples)
+        traced = self._traced
+        if traced is not None:
+            T_traced, s_traced = traced.key
+            turned = math.acos(np.clip(T[:3, 2] @ T_traced[:3, 2], -1.0, 1.0))
+            sun_turned = math.acos(np.clip(s0 @ s_traced, -1.0, 1.0))
+            tolerance = self.moving_angle_tolerance if sparse else self.angle_tolerance
+            if turned <= tolerance and sun_turned <= tolerance:
+                moved = np.linalg.norm(T[:3, 3] - self._key[0][:3, 3])
+                if moved <= self.move_tolerance and (moving or not self._field_is_sparse):
+                    return self._field
+                if sparse or not traced.sparse:
+                    self._field = traced.carried(T[:3, 3], sparse)
+                    self._field_is_sparse = sparse
+                    self._key = (T.copy(), s0.copy())
+                    self.fields += 1
+                    return self._field
+        self._traced = self._trace(T, s0, self._moving_samples if sparse else self._samples,
+                                   sparse)
+        self._field = self._traced.carried(T[:3, 3], sparse)
         self._field_is_sparse = sparse
         self._key = (T.copy(), s0.copy())
         self.traces += 1
+        self.fields += 1
         return self._field
 
     @property
     def field_is_sparse(self):
-        """Tell whether the present field was traced with the moving lens's fewer rays."""
+        """Tell whether the present field holds the moving lens's fewer rays."""
         return self._field_is_sparse
 
-    def _trace(self, T_world_lens, s0, samples):
-        """Trace `samples` in every band at once; return the FluxField (per unit DNI)."""
+    def _trace(self, T_world_lens, s0, samples, sparse):
+        """Trace `samples` in every band at once; return their _TracedRays (per unit DNI)."""
         result = trace_bands(self.lens, samples, self._indices, s0, T_world_lens,
                              irradiance=1.0)
-        hit = result.hit
         power = self._weights[:, None] * result.power
-        # the rays that reach the panel, band after band (as B separate traces gave them)
         incident = result.incident_power
-        lost = incident * self.lens.transmission - float(power[hit].sum())
-        lens_axis = T_world_lens[:3, 2]
-        return FluxField(points=result.points[hit][:, :2], power=power[hit],
-                         direct=max(0.0, -float(s0[2])), lens_centre=T_world_lens[:3, 3].copy(),
-                         lens_axis=lens_axis.copy(), aperture_radius=self.lens.aperture_radius,
-                         sun_ray=s0.copy(),
-                         tir_fraction=lost / incident if incident > 0.0 else 0.0)
+        # every stride-th sample of a full trace: the rays a sparse trace would give
+        stride = 1 if sparse else self.moving_stride
+        subset = np.zeros(result.hit.shape[1], bool)
+        subset[::stride] = True
+        return _TracedRays(
+            key=(T_world_lens.copy(), s0.copy()), sparse=sparse, hit=result.hit,
+            points=result.points[..., :2], directions=result.directions, power=power,
+            subset=subset, stride=stride, incident=incident,
+            transmission=self.lens.transmission, direct=max(0.0, -float(s0[2])),
+            lens_axis=T_world_lens[:3, 2].copy(), aperture_radius=self.lens.aperture_radius,
+            sun_ray=s0.copy())
+
+
+class _TracedRays:
+    """
+    The rays of one trace leaving the lens, to carry along with a lens that only moves.
+
+    A ray leaving the lens is a line; the lens moved by t without turning moves every
+    line by t, so the ray that met the panel (z = 0) at p with direction d now meets it at
+    p + t_xy - t_z d_xy / d_z: the trace at the new pose, exactly (the power and the rays
+    lost to total internal reflection do not change). Kept: the hit points and slopes
+    d_xy / d_z of the rays that reach the panel, all of them and the moving lens's subset.
+    """
+
+    def __init__(self, key, sparse, hit, points, directions, power, subset, stride, incident,
+                 transmission, direct, lens_axis, aperture_radius, sun_ray):
+        """Keep the panel-reaching rays of a trace at lens pose `key` (see the class)."""
+        self.key = key
+        self.sparse = sparse
+        self._origin = key[0][:3, 3].copy()
+        self._common = {'direct': direct, 'lens_axis': lens_axis,
+                        'aperture_radius': aperture_radius, 'sun_ray': sun_ray}
+        self._trace = (hit, points, directions, power, subset, stride, incident * transmission,
+                       incident)
+        self._sets = {}
+
+    def _set(self, name):
+        """Return (points, slopes, power, TIR share) of the rays of set `name`, once."""
+        if self.sparse:
+            name = 'all'     # a sparse trace holds the moving lens's rays only
+        if name not in self._sets:
+            hit, points, directions, power, subset, stride, passed, incident = self._trace
+            chosen = hit if name == 'all' else hit & subset[None, :]
+            # the rays that reach the panel, band after band (as B separate traces gave them)
+            chosen_power = power[chosen] * (1.0 if name == 'all' else float(stride))
+            lost = passed - float(chosen_power.sum())
+            leaving = directions[chosen]
+            self._sets[name] = (np.ascontiguousarray(points[chosen]),
+                                leaving[:, :2] / leaving[:, 2:3], chosen_power,
+                                lost / incident if incident > 0.0 else 0.0)
+        return self._sets[name]
+
+    def carried(self, lens_centre, sparse):
+        """Return the FluxField of these rays with the lens moved to `lens_centre` (world)."""
+        points, slopes, power, tir_fraction = self._set('moving' if sparse else 'all')
+        shift = np.asarray(lens_centre, dtype=float) - self._origin
+        if np.any(shift):
+            moved = np.empty_like(points)
+            carried_points(points, slopes, float(shift[0]), float(shift[1]), float(shift[2]),
+                           moved)
+            points = moved
+        return FluxField(points=points, power=power, lens_centre=np.array(lens_centre,
+                                                                          dtype=float),
+                         tir_fraction=tir_fraction, **self._common)
 
 
 def _every(samples, stride):
@@ -195,17 +324,42 @@ def bin_on_edges(x, y, weights, x_edges, y_edges):
     Sum `weights` of points (x, y) per cell of increasing edges: (len(y_edges) - 1, ...x).
 
     What ``np.histogram2d(y, x, bins=(y_edges, x_edges), weights=weights)`` gives (a point
-    on the last edge counts in the last cell), by a search per axis and one ``bincount``
-    (histogram2d on uneven edges costs several times more).
+    on the last edge counts in the last cell), in one compiled loop over the points
+    (``kernels.bin_points``: histogram2d on uneven edges costs tens of times more).
     """
-    nx, ny = len(x_edges) - 1, len(y_edges) - 1
-    column = np.searchsorted(x_edges, x, side='right') - 1
-    row = np.searchsorted(y_edges, y, side='right') - 1
-    column[x == x_edges[-1]] = nx - 1
-    row[y == y_edges[-1]] = ny - 1
-    inside = (column >= 0) & (column < nx) & (row >= 0) & (row < ny)
-    return np.bincount(row[inside] * nx + column[inside], weights=weights[inside],
-                       minlength=nx * ny).reshape(ny, nx)
+    x_edges = np.ascontiguousarray(x_edges, dtype=float)
+    y_edges = np.ascontiguousarray(y_edges, dtype=float)
+    out = np.zeros((len(y_edges) - 1, len(x_edges) - 1))
+    bin_points(np.asarray(x, dtype=float), np.asarray(y, dtype=float),
+               np.asarray(weights, dtype=float), x_edges, y_edges, _even_run(x_edges),
+               _even_run(y_edges), out)
+    return out
+
+
+_EVEN_RUNS = {}
+
+
+def _even_run(edges):
+    """Return (first, last) edge indices of the longest run of equal cells (1e-9 rel.)."""
+    key = edges.tobytes()
+    if key not in _EVEN_RUNS:
+        if len(_EVEN_RUNS) > 64:
+            _EVEN_RUNS.clear()
+        _EVEN_RUNS[key] = _find_even_run(edges)
+    return _EVEN_RUNS[key]
+
+
+def _find_even_run(edges):
+    """Find ``_even_run``'s answer."""
+    widths = np.diff(edges)
+    if widths.size == 0:
+        return (0, 0)
+    same = np.abs(np.diff(widths)) <= 1e-9 * widths[1:]
+    # runs of cells: a new run starts at every cell not equal to the one before it
+    starts = np.concatenate([[0], np.flatnonzero(~same) + 1])
+    ends = np.concatenate([starts[1:], [widths.size]])
+    longest = int(np.argmax(ends - starts))
+    return int(starts[longest]), int(ends[longest])
 
 
 def irradiance_on_cells(field, x_edges, y_edges, dni, shadow_samples=3):
@@ -230,9 +384,9 @@ def shadow_fractions(field, x_edges, y_edges, samples=3):
     The shadow is convex: a cell whose four corners are in it is in it, and one whose
     corners are all out and whose neighbours' corners are all out too is out of it (the
     shadow, the aperture's size, is far larger than a cell); only the cells along its
-    edge are sampled.
+    edge are sampled (``kernels.shadow_samples``).
     """
-    corners = field.in_shadow(x_edges[None, :], y_edges[:, None])      # (ny + 1, nx + 1)
+    corners = field.in_shadow_grid(x_edges, y_edges)                   # (ny + 1, nx + 1)
     inside = corners[:-1, :-1] & corners[:-1, 1:] & corners[1:, :-1] & corners[1:, 1:]
     outside = ~(corners[:-1, :-1] | corners[:-1, 1:] | corners[1:, :-1] | corners[1:, 1:])
     edge = ~(inside | outside)
@@ -243,11 +397,11 @@ def shadow_fractions(field, x_edges, y_edges, samples=3):
     near[:, :-1] |= near[:, 1:].copy()
     shadow = inside.astype(float)
     rows, cols = np.nonzero(near)
-    if rows.size:
-        fractions = (np.arange(samples) + 0.5) / samples
-        xs = x_edges[cols, None] + fractions[None] * (x_edges[cols + 1] - x_edges[cols])[:, None]
-        ys = y_edges[rows, None] + fractions[None] * (y_edges[rows + 1] - y_edges[rows])[:, None]
-        shadow[rows, cols] = field.in_shadow(xs[:, None, :], ys[:, :, None]).mean(axis=(1, 2))
+    form = field._shadow_form()
+    if rows.size and form is not None:
+        shadow_samples(np.ascontiguousarray(x_edges, dtype=float),
+                       np.ascontiguousarray(y_edges, dtype=float), rows, cols, form,
+                       int(samples), shadow)
     return shadow
 
 

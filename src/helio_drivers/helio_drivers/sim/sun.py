@@ -122,10 +122,19 @@ class Sun:
         self.dni = float(dni)
         self.clouds = clouds or CloudCover()
         self.T_robot_world = np.eye(4) if T_robot_world is None else np.asarray(T_robot_world)
+        self._last_position = None     # ((datetime, site), position) of the last call
 
     def position(self, when):
-        """Return the sun elevation and compass azimuth [rad] at an aware datetime."""
-        return sun_position(self.site, when)
+        """
+        Return the sun elevation and compass azimuth [rad] at an aware datetime.
+
+        The last answer is kept: the world's step and the node's truth ask for the same
+        instant (one ephemeris call, ~0.5 ms, instead of two).
+        """
+        key = (when, self.site)
+        if self._last_position is None or self._last_position[0] != key:
+            self._last_position = (key, sun_position(self.site, when))
+        return self._last_position[1]
 
     def ray_robot(self, when):
         """Return the unit sun ray s0 (the way light travels) in the robot frame (Eq 2)."""

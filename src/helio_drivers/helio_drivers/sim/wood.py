@@ -11,9 +11,9 @@ it the far field is used; the energy this moves is booked as ``regrid``). Far fr
 the panel is a 1-D column (same layers) under the unconcentrated sunlight.
 
 Time stepping is the Douglas alternating-direction implicit scheme for backward Euler: per
-step one tridiagonal solve along each axis (laterally a product with the cached dense inverse
-for all lines at once, in depth the Thomas algorithm per column), unconditionally stable; its
-fixed point is the exact discrete steady state.
+step one tridiagonal solve along each axis (the Thomas algorithm, all lines of an axis
+sharing its elimination coefficients, in one compiled loop nest: ``kernels.douglas_step``),
+unconditionally stable; its fixed point is the exact discrete steady state.
 Losses at the surface: convection h (T - T_a) and radiation eps sigma (T^4 - T_a^4), the
 linear part implicit, the rest of the radiation explicit; at the back, convection through the
 half bottom layer. Lateral patch sides are adiabatic (the far field has no lateral gradient).
@@ -39,6 +39,8 @@ Units: SI, temperatures in degC at the interface, K inside the radiation law.
 from dataclasses import dataclass
 import math
 
+from helio_drivers.sim.kernels import (bilinear_weights_on_axis, douglas_step, heat_sinks,
+                                       surface_loss, thomas_factors)
 import numpy as np
 
 STEFAN_BOLTZMANN = 5.670374419e-8  # [W/(m^2 K^4)]
@@ -198,51 +200,19 @@ def _tridiagonal_operator(edges, diffusivity):
     return lower, diagonal, upper
 
 
-def _apply_tridiagonal(lower, diagonal, upper, values, axis=0):
-    """Multiply the operator (along `axis` of `values`) by `values`."""
-    shape = [1] * values.ndim
-    shape[axis] = -1
-    head = [slice(None)] * values.ndim
-    tail = list(head)
-    head[axis], tail[axis] = slice(1, None), slice(None, -1)
-    head, tail = tuple(head), tuple(tail)
-    result = diagonal.reshape(shape) * values
-    result[head] += lower[1:].reshape(shape) * values[tail]
-    result[tail] += upper[:-1].reshape(shape) * values[head]
-    return result
-
-
-def _shifted_inverse_increment(lower, diagonal, upper, dt):
-    """
-    Return inv(I - dt A) - I for a lateral axis operator A (n of about 100), as float32.
-
-    The patch's lateral operators and the world's step are fixed, so the inverse is computed
-    once per dt and a sweep is one matrix product over all lines (BLAS), faster than any
-    banded or Thomas solve of the same lines in numpy (LAPACK's gttrs with many right-hand
-    sides: 1.2 ms against 0.5 ms). The product is done in single precision on the
-    increment: u = b + (inv - I) b. The increment's columns sum to zero with the cell widths
-    as weights (the operator conserves heat), so single precision's rounding stays on the
-    change per step: a heat content error of ~1e-8 of the stored heat per step, against
-    1e-7 of every temperature with the plain inverse in single precision; the products
-    cost half of double precision's.
-    """
-    n = len(diagonal)
-    shifted = np.eye(n) - dt * (np.diag(diagonal) + np.diag(upper[:-1], 1)
-                                + np.diag(lower[1:], -1))
-    return (np.linalg.inv(shifted) - np.eye(n)).astype(np.float32)
-
-
 def bilinear_weights(centres, coordinates):
     """
     Linear interpolation weights on a non-uniform axis of cell centres.
 
-    Returns (index i0, weight of i0+1, inside mask); coordinates between the outer edge and
-    the outermost centre take the outermost value.
+    Returns (index i0 = clip(searchsorted(centres, x) - 1, 0, n - 2), weight of i0 + 1,
+    clipped to [0, 1]); coordinates between the outer edge and the outermost centre take
+    the outermost value. A compiled loop (``kernels.bilinear_weights_on_axis``).
     """
     coordinates = np.asarray(coordinates, dtype=float)
-    index = np.clip(np.searchsorted(centres, coordinates) - 1, 0, len(centres) - 2)
-    span = centres[index + 1] - centres[index]
-    weight = np.clip((coordinates - centres[index]) / span, 0.0, 1.0)
+    index = np.empty(coordinates.shape, np.intp)
+    weight = np.empty(coordinates.shape)
+    bilinear_weights_on_axis(np.ascontiguousarray(centres, dtype=float),
+                             coordinates.reshape(-1), index.reshape(-1), weight.reshape(-1))
     return index, weight
 
 
@@ -315,8 +285,8 @@ class WoodPanel:
         # (world y) and into the depth the wood conducts with `conductivity`.
         self._ops_x = _tridiagonal_operator(self._lateral, self.wood.diffusivity_along_grain)
         self._ops_y = _tridiagonal_operator(self._lateral, a)
-        self._inverse_dt = None
-        self._increments = None
+        self._sweep_dt = None
+        self._sweeps = None
         self._depth_dt = None
         self._depth_elimination = None
         lower, diagonal, upper = _tridiagonal_operator(self.z_edges, a)
@@ -445,16 +415,11 @@ class WoodPanel:
     def _loss_and_slope(self, top):
         """Return the surface loss [W/m^2] and its derivative [W/(m^2 K)] at theta `top`."""
         w = self.wood
-        t_a = w.ambient + KELVIN
-        t = top + t_a
-        np.maximum(t, 0.0, out=t)
-        squared = t * t
-        radiating = w.emissivity * STEFAN_BOLTZMANN
-        loss = w.convection_top * top + radiating * (squared * squared - t_a ** 4)
-        squared *= t
-        squared *= 4.0 * radiating
-        squared += w.convection_top
-        return loss, squared
+        top = np.ascontiguousarray(top, dtype=float)
+        loss, slope = np.empty_like(top), np.empty_like(top)
+        surface_loss(top.reshape(-1), w.ambient + KELVIN, w.convection_top,
+                     w.emissivity * STEFAN_BOLTZMANN, loss.reshape(-1), slope.reshape(-1))
+        return loss, slope
 
     def _loss_linearisation(self, top):
         """
@@ -465,12 +430,6 @@ class WoodPanel:
         loss, h = self._loss_and_slope(top)
         loss -= h * top
         return h, loss
-
-    def _apply_z(self, theta, h_top):
-        """Return Az theta, the depth operator with the surface loss h_top (per column)."""
-        result = _apply_tridiagonal(*self._ops_z, theta)
-        result[0] -= h_top * theta[0] / (self.wood.volumetric_heat_capacity * self.z_widths[0])
-        return result
 
     def _depth_coefficients(self, dt):
         """
@@ -533,12 +492,16 @@ class WoodPanel:
                   & (y >= self.y_edges[0]) & (y <= self.y_edges[-1]))
         return self.wood.ambient + np.where(inside, value, self.far_field[0])
 
+    def surface_rise(self):
+        """Return the surface rise of the patch's columns (flat, K) and of the far field."""
+        return np.ascontiguousarray(self._surface).reshape(-1), float(self.far_field[0])
+
     def surface_sampler(self, x, y):
         """
-        Return sample() -> the surface temperature at fixed world points (x, y) now [degC].
+        Return a SurfaceSampler: sampler() -> the surface temperature at world points (x, y).
 
-        The interpolation weights are found once: sample() costs a gather per call. It is
-        valid while the patch stays where it is (``placement`` unchanged); it gives what
+        The interpolation weights are found once: a call costs a gather. It is valid while
+        the patch stays where it is (``placement`` unchanged); it gives what
         ``surface_temperature_at(x, y)`` gives.
         """
         x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
@@ -546,22 +509,7 @@ class WoodPanel:
         iy, wy = bilinear_weights(self.y_centres, y)
         inside = ((x >= self.x_edges[0]) & (x <= self.x_edges[-1])
                   & (y >= self.y_edges[0]) & (y <= self.y_edges[-1]))
-        columns = len(self.x_centres)
-        corner = iy * columns + ix
-        corners = (corner, corner + 1, corner + columns, corner + columns + 1)
-        weights = (1 - wx, wx, 1 - wy, wy)
-        placement = self.placement
-
-        def sample():
-            if self.placement != placement:
-                raise RuntimeError('the patch moved: make a new surface_sampler')
-            surface = self._surface.reshape(-1)
-            low_x, high_x, low_y, high_y = weights
-            value = (low_y * (low_x * surface[corners[0]] + high_x * surface[corners[1]])
-                     + high_y * (low_x * surface[corners[2]] + high_x * surface[corners[3]]))
-            return self.wood.ambient + np.where(inside, value, self.far_field[0])
-
-        return sample
+        return SurfaceSampler(self, iy * len(self.x_centres) + ix, wx, wy, inside)
 
     def char_at(self, x, y):
         """Char fraction of the raster pixel under world points (x, y) (0 off the panel)."""
@@ -617,20 +565,22 @@ class WoodPanel:
         self.ledger.regrid += self.stored_energy() - before
         self.recentres += 1
 
-    def _lateral_increments(self, dt):
+    def _sweep_coefficients(self, dt):
         """
-        Return inv(I - dt Ax) - I transposed and inv(I - dt Ay) - I (float32), per dt.
+        Return the per-dt coefficients of ``kernels.douglas_step`` (kept while dt is).
 
-        With dt Ay as well, for the explicit parts of the step.
+        (dt Ay's and dt Az's bands, the Thomas factors of I - dt Ax and I - dt Ay, the
+        bottom-up elimination of I - dt Az without the surface loss, its top pivot.)
         """
-        if self._inverse_dt != dt:
-            lower, diagonal, upper = self._ops_y
-            self._increments = (
-                np.ascontiguousarray(_shifted_inverse_increment(*self._ops_x, dt).T),
-                _shifted_inverse_increment(*self._ops_y, dt),
-                (dt * lower, dt * diagonal, dt * upper))
-            self._inverse_dt = dt
-        return self._increments
+        if self._sweep_dt != dt:
+            above, factor, inverse_pivot, top = self._depth_coefficients(dt)
+            self._sweeps = (
+                tuple(np.ascontiguousarray(dt * band) for band in self._ops_y),
+                tuple(np.ascontiguousarray(dt * band) for band in self._ops_z),
+                thomas_factors(*self._ops_x, dt), thomas_factors(*self._ops_y, dt),
+                (above.copy(), factor.copy(), inverse_pivot.copy()), float(top))
+            self._sweep_dt = dt
+        return self._sweeps
 
     def step(self, dt, irradiance, far_irradiance=0.0):
         """
@@ -638,7 +588,9 @@ class WoodPanel:
 
         `far_irradiance` is the (unconcentrated) irradiance far from the patch [W/m^2].
         Douglas ADI: (I - dt Ax) u1 = u + dt (Ay + Az) u + dt f; (I - dt Ay) u2 = u1 - dt Ay u;
-        (I - dt Az) u3 = u2 - dt Az u; f the explicit surface source.
+        (I - dt Az) u3 = u2 - dt Az u; f the explicit surface source. The sweeps are one
+        compiled loop nest (``kernels.douglas_step``: the Thomas algorithm along each axis
+        in double precision, the explicit terms recomputed where they are used).
         """
         if not dt > 0.0:
             raise ValueError(f'dt must be > 0 s, got {dt}')
@@ -651,30 +603,21 @@ class WoodPanel:
         rho_c = self.wood.volumetric_heat_capacity
         dz0 = self.z_widths[0]
         absorbed = self._absorptance * irradiance
-        theta = self.theta
+        theta = self._flat('theta').reshape(self.theta.shape)
         h_top, remainder = self._loss_linearisation(theta[0])
-        source_top = (absorbed - remainder) / (rho_c * dz0)
-
-        increment_x_t, increment_y, dt_ops_y = self._lateral_increments(dt)
-        dt_ay = _apply_tridiagonal(*dt_ops_y, theta, axis=1)          # dt Ay u
-        dt_az = self._apply_z(theta, h_top)
-        dt_az *= dt                                                   # dt Az u
-        rhs = theta + dt_ay
-        rhs += dt_az
-        rhs[0] += dt * source_top
-        # x sweep first, then y: u + (inv - I) u along each axis, the increment in float32
-        u1 = rhs + np.matmul(rhs.astype(np.float32), increment_x_t)
-        u1 -= dt_ay
-        u2 = u1 + np.matmul(increment_y, u1.astype(np.float32))
-        u2 -= dt_az
-        u3 = self._solve_z(dt, u2, h_top)
+        dt_source = (absorbed - remainder) * (dt / (rho_c * dz0))
+        top_loss = h_top * (dt / (rho_c * dz0))
+        dt_ay, dt_az, x_factors, y_factors, z_elimination, top = self._sweep_coefficients(dt)
+        u3 = np.empty_like(theta)
+        layer_max = douglas_step(theta, u3, dt_source, top_loss, dt_ay, dt_az, x_factors,
+                                 y_factors, z_elimination, top_loss + top)
 
         areas = self.cell_areas
         self.ledger.absorbed += dt * float(np.sum(absorbed * areas))
         self.ledger.lost_top += dt * float(np.sum((h_top * u3[0] + remainder) * areas))
         self.ledger.lost_back += dt * float(np.sum(self._h_back * u3[-1] * areas))
         self.theta = u3
-        evaporated, pyrolysed = self._heat_sinks(dt)
+        evaporated, pyrolysed = self._heat_sinks(dt, layer_max)
         self.ledger.evaporated += evaporated
         self.ledger.pyrolysed += pyrolysed
         self._last_absorbed = absorbed
@@ -692,13 +635,14 @@ class WoodPanel:
             setattr(self, name, field)
         return field.reshape(-1)
 
-    def _heat_sinks(self, dt):
+    def _heat_sinks(self, dt, layer_max=None):
         """
         Evaporate water, then pyrolyse wood, in the cells hot enough (in place).
 
-        One comparison over the patch finds the cells above the lower of the two
-        temperatures; both sinks then work on those few cells only. Returns the heat taken
-        by each [J].
+        Cell by cell in one compiled loop (``kernels.heat_sinks``: ``_take_heat``'s rule)
+        over the layers down to the last whose highest rise (`layer_max`, from the step;
+        None: all) passes the lower of the two temperatures. Returns the heat taken by
+        each [J].
         """
         w = self.wood
         boiling = w.boiling_temperature - w.ambient
@@ -709,26 +653,20 @@ class WoodPanel:
             return 0.0, 0.0
         lowest = min(boiling if evaporating else math.inf,
                      threshold if pyrolysing else math.inf)
-        theta = self._flat('theta')
-        candidates = np.flatnonzero(theta > lowest)
-        evaporated = pyrolysed = 0.0
-        if candidates.size == 0:
-            return evaporated, pyrolysed
-        rho_c = w.volumetric_heat_capacity
-        if evaporating:
-            moisture = self._flat('moisture')
-            wet = candidates[(theta[candidates] > boiling) & (moisture[candidates] > 0.0)]
-            evaporated = _take_heat(theta, moisture, wet, boiling, w.latent_heat,
-                                    moisture[wet], rho_c, self._volumes)
-        if pyrolysing:
-            unpyrolysed = self._flat('unpyrolysed')
-            hot = candidates[theta[candidates] > threshold]
-            rate = pyrolysis_rate(w, theta[hot] + w.ambient)
-            convertible = unpyrolysed[hot] * -np.expm1(-rate * dt)
-            pyrolysed = _take_heat(theta, unpyrolysed, hot, threshold,
-                                   w.heat_of_pyrolysis * w.density, convertible, rho_c,
-                                   self._volumes)
-        return evaporated, pyrolysed
+        layers = len(self.z_widths)
+        if layer_max is not None:
+            hot = np.flatnonzero(np.asarray(layer_max) > lowest)
+            layers = int(hot[-1]) + 1 if hot.size else 0
+        if layers == 0:
+            return 0.0, 0.0
+        return heat_sinks(self._flat('theta'), self._flat('moisture'),
+                          self._flat('unpyrolysed'), self._volumes,
+                          layers * self.cell_areas.size, dt,
+                          w.volumetric_heat_capacity, boiling,
+                          w.latent_heat if evaporating else 0.0, threshold,
+                          w.heat_of_pyrolysis * w.density if pyrolysing else 0.0,
+                          w.ambient + KELVIN, w.char_preexponential,
+                          w.char_activation_energy, GAS_CONSTANT)
 
     def _step_far_field(self, dt, far_irradiance):
         """Backward-Euler step of the 1-D column far from the spot."""
@@ -798,3 +736,31 @@ class WoodPanel:
         cell = self.grid.fine_cell
         return (self.raster_origin[0] + (np.arange(self.raster_shape[1]) + 0.5) * cell,
                 self.raster_origin[1] + (np.arange(self.raster_shape[0]) + 0.5) * cell)
+
+
+class SurfaceSampler:
+    """The surface temperature of a panel at fixed world points (``surface_sampler``)."""
+
+    def __init__(self, panel, corner, wx, wy, inside):
+        """Keep the points' lower-left patch column `corner` (flat), weights and mask."""
+        self._panel = panel
+        self._placement = panel.placement
+        self.columns = len(panel.x_centres)
+        self.corner, self.wx, self.wy, self.inside = corner, wx, wy, inside
+
+    def surface(self):
+        """Return the panel's surface rise (flat, K) and far-field rise now (checked valid)."""
+        panel = self._panel
+        if panel.placement != self._placement:
+            raise RuntimeError('the patch moved: make a new surface_sampler')
+        return panel.surface_rise()
+
+    def __call__(self):
+        """Return the surface temperature at the points now [degC]."""
+        surface, far = self.surface()
+        corner, columns, wx, wy = self.corner, self.columns, self.wx, self.wy
+        low_x, low_y = 1 - wx, 1 - wy
+        value = (low_y * (low_x * surface[corner] + wx * surface[corner + 1])
+                 + wy * (low_x * surface[corner + columns]
+                         + wx * surface[corner + columns + 1]))
+        return self._panel.wood.ambient + np.where(self.inside, value, far)

@@ -24,6 +24,7 @@ from helio_drivers.sim.cameras import (light_window, RgbCamera, RgbSettings, The
                                        ThermalSettings)
 from helio_drivers.sim.clock import SimClock
 from helio_drivers.sim.flux import irradiance_on_cells, lens_pose_in_world, LensFlux
+from helio_drivers.sim.kernels import char_canvas
 from helio_drivers.sim.memory import keep_freed_memory
 from helio_drivers.sim.sun import CloudCover, RandomClouds, Sun
 from helio_drivers.sim.wood import GridParameters, WoodPanel, WoodParameters
@@ -200,6 +201,10 @@ class SimWorld:
         self._light = None
         self._pose_key = None
         self._pose = None
+        self._lens_pose_key = None
+        self._T_world_lens = None
+        self._camera_pose_key = None
+        self._camera_poses = None
         self.steps = 0
         self._refresh()
 
@@ -237,7 +242,11 @@ class SimWorld:
     def camera_poses(self):
         """Return (T_world_rgb, T_world_thermal) at the present joints."""
         pose = self.pose()
-        return (self.T_world_robot @ pose.T_robot_rgb, self.T_world_robot @ pose.T_robot_thermal)
+        if self._camera_pose_key != self._pose_key:     # once per pose
+            self._camera_poses = (self.T_world_robot @ pose.T_robot_rgb,
+                                  self.T_world_robot @ pose.T_robot_thermal)
+            self._camera_pose_key = self._pose_key
+        return tuple(T.copy() for T in self._camera_poses)
 
     def sun_ray_world(self):
         """Return the true sun ray s0 in the world frame now (for tests and the demo only)."""
@@ -280,12 +289,16 @@ class SimWorld:
             self._sun_up = position.elevation > 0.0
         self._dni = self.sun.dni * self.sun.clouds.attenuation(now) if self._sun_up else 0.0
         pose_key = self._pose_key
-        T_world_lens = lens_pose_in_world(self.T_robot_world, self.pose().T_robot_lens)
+        pose = self.pose()
         moving = pose_key is not None and self._pose_key != pose_key   # since the last step
+        if self._lens_pose_key != self._pose_key:
+            self._T_world_lens = lens_pose_in_world(self.T_robot_world, pose.T_robot_lens)
+            self._lens_pose_key = self._pose_key
+        T_world_lens = self._T_world_lens
         self._field = self.flux.field(T_world_lens, self._sun_ray, moving=moving)
         centroid = self._field.centroid()
         self.panel.follow(centroid)
-        key = (self.flux.traces, tuple(self.panel.centre))
+        key = (self.flux.fields, tuple(self.panel.centre))
         if key != self._irradiance_key:
             self._unit_irradiance = irradiance_on_cells(self._field, self.panel.x_edges,
                                                         self.panel.y_edges, 1.0)
@@ -323,12 +336,12 @@ class SimWorld:
         """Return the RGB image (H, W, 3) uint8 at the camera's present pose."""
         T_world_rgb, _ = self.camera_poses()
         field = self._field
-        if self.flux.traces != self._light_key:  # the lit window changes only with a new trace
+        if self.flux.fields != self._light_key:  # the lit window changes only with a new field
             window = self._light_window(field)
             self._light = None if window is None else light_window(
                 field, self.panel.raster_shape, self.panel.raster_origin,
                 self.panel.grid.fine_cell, window)
-            self._light_key = self.flux.traces
+            self._light_key = self.flux.fields
         self.rgb.update_char(self.panel.char, self.panel.take_char_changes())
         attenuation = self._dni / max(self.sun.dni, 1e-9)   # clouds dim the direct sun only
         return self.rgb.render(T_world_rgb, self._light, attenuation, self._rng)
@@ -342,7 +355,7 @@ class SimWorld:
         reach = field.aperture_radius / max(abs(s0[2]), 0.2) + 0.004
         boxes = [(centre[0] - reach, centre[0] + reach, centre[1] - reach, centre[1] + reach)]
         if field.points.size:
-            lo, hi = field.points.min(axis=0), field.points.max(axis=0)
+            lo, hi = field.bounds()
             boxes.append((lo[0] - 0.002, hi[0] + 0.002, lo[1] - 0.002, hi[1] + 0.002))
         return (min(b[0] for b in boxes), max(b[1] for b in boxes),
                 min(b[2] for b in boxes), max(b[3] for b in boxes))
@@ -350,7 +363,9 @@ class SimWorld:
     # ------------------------------------------------------------------ canvas
     def canvas_image(self):
         """Return the char map as a top-view mono8 image (255 bare, 0 char; row 0 at y_max)."""
-        return np.flipud(np.rint(255.0 * (1.0 - self.panel.char))).astype(np.uint8)
+        image = np.empty(self.panel.char.shape, np.uint8)
+        char_canvas(self.panel.char, image)
+        return image
 
     def canvas_picture(self):
         """
