@@ -42,7 +42,6 @@ The run directory (``run_dir`` of the goal, else ``runs_dir``/<UTC time>) holds
 ``plan.json``, ``journal.jsonl`` (``helio_control.run_journal``) and ``resume.json``.
 """
 
-import dataclasses
 import datetime
 import glob
 import hashlib
@@ -53,7 +52,6 @@ import time
 import traceback
 
 from geometry_msgs.msg import PointStamped
-from helio_control.cycle_model import load_cycle_config
 from helio_control.dot_cycle import CycleSettings, Decision, DotCycle
 from helio_control.picture_input import picture_from_image_msg, PictureError
 from helio_control.plan import options_from_goal, Plan, plan_dots, plan_picture
@@ -530,17 +528,16 @@ class PainterNode(Node):
         try:
             options = options_from_goal(goal)
             options.d_lp, options.retreat = self.heating_distance, self.retreat_offset
-            model, limits = load_cycle_config()
             if (goal.cooling or self.cooling) == 'window':
                 options.min_separation = self.window_separation     # no hot neighbour next
-                model = dataclasses.replace(model, cooling_s=0.0)   # and no wait: estimate
+                options.cooling_wait = False                        # and no wait
             sun = point_to_array(self.sun.direction)
             if goal.points:
                 points = np.array([[p.x, p.y] for p in goal.points], dtype=float)
-                return plan_dots(points, options, self.rig, sun, cycle=(model, limits))
+                return plan_dots(points, options, self.rig, sun)
             picture = goal.image_path if goal.image_path else \
                 picture_from_image_msg(goal.image)
-            return plan_picture(picture, options, self.rig, sun, cycle=(model, limits))
+            return plan_picture(picture, options, self.rig, sun)
         except (PictureError, PlanError, PlanOptionsError, ValueError) as error:
             raise PaintFailed(f'cannot plan the painting: {error}') from None
 

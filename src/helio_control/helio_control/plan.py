@@ -74,6 +74,7 @@ class PlanOptions:
     retreat: float = 0.03
     solver_budget_s: float = 0.0
     min_separation: float = 0.0
+    cooling_wait: bool = True
     sun_elevation_deg: float = 60.0
     sun_azimuth_deg: float = 0.0
 
@@ -97,6 +98,9 @@ class PlanOptions:
             number(name, positive=False)
         number('solver_budget_s', allow_zero=True)
         number('min_separation', allow_zero=True)
+        if not isinstance(self.cooling_wait, (bool, np.bool_)):
+            raise PlanOptionsError(f'cooling_wait must be true or false, got '
+                                   f'{self.cooling_wait!r}')
         if self.canvas_size > self.max_canvas_size:
             raise PlanOptionsError(
                 f'canvas_size {self.canvas_size} m is larger than the rig can reach: at most '
@@ -379,7 +383,9 @@ def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
     parameters['close_steps'] = metric.close_steps(order)
     travel = move_time(joints_retreat[order[:-1]], joints_retreat[order[1:]], limits)
     approach = move_time(joints_retreat[order], joints_heat[order], limits)
-    estimate = estimate_time(model, n_p[kept][order], approach, approach, travel)
+    # the window rule goes on without the cooling wait (a hot neighbour still costs it above)
+    estimate = estimate_time(model if options.cooling_wait else replace(model, cooling_s=0.0),
+                             n_p[kept][order], approach, approach, travel)
     return Plan(dots=points[kept][order], n_p_targets=n_p[kept][order],
                 grid_uv=grid_uv[kept][order], rejected=rejected,
                 travel_m=metric.path_length(order), travel_s=float(np.sum(travel)),

@@ -2,8 +2,9 @@
 
 from types import SimpleNamespace
 
+from helio_control.cycle_model import load_cycle_config
 from helio_control.plan import GOAL_FIELDS, load_plan_options, options_from_goal, Plan
-from helio_control.plan import plan_picture, PlanOptions
+from helio_control.plan import plan_picture, PlanOptions, PlanOptionsError
 from helio_control.quality import chamfer_mm, render_dots, ssim_of_dots
 import numpy as np
 import pytest
@@ -98,3 +99,21 @@ def test_tone_dot_size_scales_n_p_with_darkness():
     left = plan.n_p_targets[plan.grid_uv[:, 0] < 20]
     right = plan.n_p_targets[plan.grid_uv[:, 0] >= 20]
     assert np.all(left == round(10 + 20 * 0.4)) and np.all(right == round(10 + 20 * 0.9))
+
+
+def test_the_window_rules_plan_keeps_hot_neighbours_apart_and_waits_no_cooling():
+    # the painter's window rule: min_separation and no cooling wait in the estimate; the
+    # separation's penalty is still the cooling wait a hot neighbour would cost
+    paper = plan_picture('sample:text', PlanOptions(dot_radius=0.003))
+    window = plan_picture('sample:text', PlanOptions(dot_radius=0.003, min_separation=0.0075,
+                                                     cooling_wait=False))
+    assert window.parameters['close_steps'] == 0
+    steps = np.diff(window.dots, axis=0)
+    assert np.hypot(steps[:, 0], steps[:, 1]).min() >= 0.0075
+    model, _ = load_cycle_config()
+    saved = paper.time_estimate['total_s'] - window.time_estimate['total_s']
+    # per dot the paper's rule waits max(cooling, retreat move) and the window rule only the
+    # retreat move; the window's longer tour costs a little of it back
+    assert 0.5 * model.cooling_s * len(paper) < saved < model.cooling_s * len(paper)
+    with pytest.raises(PlanOptionsError, match='cooling_wait'):
+        PlanOptions(cooling_wait='no').validate()
