@@ -77,33 +77,41 @@ def in_lens_shadow(points_world, T_world_lens, sun_world, shadow_radius):
     return (distance > 0.0) & (np.linalg.norm(crossing - centre, axis=1) <= shadow_radius)
 
 
+def view_angle(T_world_camera, point):
+    """Return the angle [rad] between the panel's normal and the sight line from `point`."""
+    to_camera = T_world_camera[:3, 3] - np.asarray(point, dtype=float)
+    return math.acos(max(-1.0, min(1.0, float(to_camera[2] / np.linalg.norm(to_camera)))))
+
+
 def sees_marker_and_spot(rig, x, sun, camera, T_robot_world, marker_side, margin,
                          shadow_radius=0.022, min_marker_pixels=40.0,
                          max_view_angle=math.radians(65.0), need_marker=True):
     """
     Return whether joints x show the camera the marker and the spot's centre ray.
 
-    The whole marker must lie in the image (`margin` [px]), span at least
-    `min_marker_pixels` on each side, be seen no more obliquely than `max_view_angle` from
-    the panel's normal, and stand outside the lens shadow; the point where the ray through
-    the lens centre meets the panel must lie in the image too. Without `need_marker` (the
-    spot detector maps the spot through the kinematic camera pose once the rig is
-    calibrated) only the spot is checked.
+    The point where the ray through the lens centre meets the panel must lie in the image
+    (`margin` [px]) and be seen no more obliquely than `max_view_angle` from the panel's
+    normal: the camera rides beside the lens, and for a low sun one wrist solution lowers it
+    to the panel's height, where the panel is a sliver a few pixels high and the spot borders
+    the dark beyond it. The whole marker must lie in the image too, span at least
+    `min_marker_pixels` on each side, be seen no more obliquely than `max_view_angle`, and
+    stand outside the lens shadow. Without `need_marker` (the spot detector maps the spot
+    through the kinematic camera pose once the rig is calibrated) only the spot is checked.
     """
     T_robot_world = np.asarray(T_robot_world, dtype=float)
     T_world_robot = invert_transform(T_robot_world)
     pose = rig.forward(x)
     T_world_rgb = T_world_robot @ pose.T_robot_rgb
     spot, _ = focus_point(rig, x, sun, T_robot_world)
-    corners = marker_corners(marker_side)
-    if spot is None or not in_view(camera, T_world_rgb, [spot], margin):
+    if spot is None or not in_view(camera, T_world_rgb, [spot], margin) \
+            or view_angle(T_world_rgb, spot) > max_view_angle:
         return False
     if not need_marker:
         return True
+    corners = marker_corners(marker_side)
     if not in_view(camera, T_world_rgb, corners, margin):
         return False
-    to_camera = T_world_rgb[:3, 3] / np.linalg.norm(T_world_rgb[:3, 3])   # marker at origin
-    if math.acos(max(-1.0, min(1.0, float(to_camera[2])))) > max_view_angle:
+    if view_angle(T_world_rgb, np.zeros(3)) > max_view_angle:     # marker at the origin
         return False
     pixels = camera.project(transform_points(invert_transform(T_world_rgb), corners))
     sides = np.linalg.norm(pixels - np.roll(pixels, 1, axis=0), axis=1)
@@ -188,19 +196,33 @@ def acquisition_poses(rig, T_robot_world, elevation, camera, marker_side, points
     """
     Return [(azimuth guess [rad], joints)] to look for the spot with an unknown heading.
 
-    For each guessed azimuth (a ring of `azimuth_step`), the first candidate pose (aligned
-    with the guess and focused first, then closer, farther and tilted) from which the camera
-    would see the marker and the spot were the guess right. A guess with no such pose is
-    left out.
+    For each guessed azimuth (a ring of `azimuth_step`), the pose from which the camera
+    would see the spot (and the marker, with `need_marker`) were the guess right: of the
+    first (distance, tilt) in the order given (aligned with the guess and focused first,
+    then closer, farther and tilted) that has such poses at some panel point, the one that
+    sees the spot least obliquely (the sharpest image of it, farthest from the panel's
+    edge as the camera sees it). A guess with no such pose is left out.
     """
+    T_robot_world = np.asarray(T_robot_world, dtype=float)
+    T_world_robot = invert_transform(T_robot_world)
     found = []
     for azimuth in np.arange(0.0, 2.0 * math.pi - 1e-9, azimuth_step):
         sun = sun_ray(elevation, azimuth)
-        first = next(candidate_poses(rig, T_robot_world, sun, camera, marker_side, points,
-                                     distances, tilts, margin=margin,
-                                     need_marker=need_marker), None)
-        if first is not None:
-            found.append((float(azimuth), first[0]))
+        for distance in distances:
+            best = None
+            for tilt in tilts:
+                for x, _ in candidate_poses(rig, T_robot_world, sun, camera, marker_side,
+                                            points, (distance,), (tilt,), margin=margin,
+                                            need_marker=need_marker):
+                    spot, _ = focus_point(rig, x, sun, T_robot_world)
+                    angle = view_angle(T_world_robot @ rig.forward(x).T_robot_rgb, spot)
+                    if best is None or angle < best[0]:
+                        best = (angle, x)
+                if best is not None:
+                    break
+            if best is not None:
+                found.append((float(azimuth), best[1]))
+                break
     return found
 
 

@@ -120,3 +120,38 @@ def test_acquisition_aims_at_every_azimuth_guess_where_the_camera_would_see_the_
         axis = rig.forward(x).T_robot_lens[:3, 2]
         assert math.degrees(math.acos(min(1.0, float(axis @ -sun)))) < 30.0 + 1e-6
         assert sees_marker_and_spot(rig, x, sun, CAMERA, T, MARKER_SIDE, 30.0)
+
+
+def camera_height_and_sight(rig, x, sun):
+    """Return the RGB camera's height over the panel [m] and its sight angle to the spot [deg]."""
+    T = rig.parameters.T_robot_world
+    T_world_robot = invert_transform(T)
+    camera = (T_world_robot @ rig.forward(x).T_robot_rgb)[:3, 3]
+    lens = (T_world_robot @ rig.forward(x).T_robot_lens)[:3, 3]
+    sun_world = T_world_robot[:3, :3] @ sun
+    spot = lens + (-lens[2] / sun_world[2]) * sun_world      # the chief ray on the panel
+    sight = camera - spot
+    return camera[2], math.degrees(math.acos(sight[2] / np.linalg.norm(sight)))
+
+
+def test_a_low_sun_is_looked_for_from_above_not_along_the_panel(rig):
+    # 26 deg up: the lens axis tilts 64 deg, and the wrist solution that turns the camera
+    # down puts it at the panel's height, looking along the wood (the spot a few pixels high
+    # beside the dark beyond the panel); the acquisition must take the other view
+    T = rig.parameters.T_robot_world
+    elevation, azimuth = math.radians(26.0), math.radians(120.0)
+    sun = sun_ray(elevation, azimuth)
+    centre = T[:3, :3] @ np.array([-0.025, 0.135, 0.0]) + T[:3, 3] - 0.112 * sun
+    yaw, pitch = rig.yaw_pitch_for_axis(-sun, math.atan2(centre[1], centre[0]))
+    grazing = rig.inverse(centre, yaw, pitch)
+    height, sight = camera_height_and_sight(rig, grazing, sun)
+    assert height < 0.02 and sight > 80.0
+    assert not sees_marker_and_spot(rig, grazing, sun, CAMERA, T, MARKER_SIDE, 30.0,
+                                    need_marker=False)
+    found = dict(acquisition_poses(rig, T, elevation, CAMERA, MARKER_SIDE, POINTS,
+                                   math.radians(30.0), need_marker=False))
+    x = next(x for a, x in found.items() if abs(a - azimuth) < 1e-9)
+    height, sight = camera_height_and_sight(rig, x, sun)
+    print(f'\n26 deg sun: the camera of the acquisition pose {height * 100:.1f} cm up, its sight '
+          f'line {sight:.1f} deg off the normal')
+    assert sight <= 65.0 and height > 0.04
