@@ -156,6 +156,11 @@ class LensPlannerNode(Node):
         self.view_margin = declare(self, 'view_margin', 30.0,
                                    'Marker and spot must lie this far inside the image '
                                    '[px].', 0.0, 500.0)
+        self.max_view_angle = math.radians(declare(
+            self, 'max_view_angle_deg', math.degrees(sun_sweep.MAX_VIEW_ANGLE),
+            'The camera must see the marker and the spot no more obliquely than this from '
+            "the panel's normal; a sight line along the wood shows the spot a few pixels high "
+            '[deg].', 10.0, 89.0))
         self.observe_frames = declare(self, 'observe_frames', 4,
                                       'Spot observations collected per pose [-].', 1, 100)
         self.observe_timeout = declare(self, 'observe_timeout', 10.0,
@@ -641,10 +646,21 @@ class LensPlannerNode(Node):
                 self.view_points, math.radians(self.acquire_step),
                 (self.heating_distance - 0.016, self.heating_distance - 0.022,
                  self.heating_distance + 0.03), margin=self.view_margin,
-                need_marker=not self.world_calibrated)
+                need_marker=not self.world_calibrated, max_view_angle=self.max_view_angle)
+            step = math.radians(self.acquire_step)
+            guesses = np.arange(0.0, 2.0 * math.pi - 1e-9, step)
+            covered = [azimuth for azimuth, _ in candidates]
+            blind = [a for a in guesses
+                     if not any(abs(math.remainder(a - c, 2.0 * math.pi)) < 1e-6
+                                for c in covered)]
+            # why a guess has no pose: for a low sun the tilted lens puts the camera below it
+            # wherever the lens yaw servo cannot turn it to the sun's side (README)
+            no_view = (f'for a sun {math.degrees(elevation):.1f} deg up (ephemeris), no pose '
+                       f'sees the spot within {math.degrees(self.max_view_angle):.0f} deg of '
+                       "the panel's normal at the azimuth guesses "
+                       f'{sun_sweep.azimuth_runs(blind, step)} from the robot x axis')
             if not candidates:
-                raise GoalFailed('no pose to look for the spot: the view points are out of '
-                                 'reach or out of the camera view for this sun elevation')
+                raise GoalFailed(f'no pose to look for the spot: {no_view}')
             feedback.phase, feedback.total = 'acquiring', len(candidates)
             for index, (azimuth, x) in enumerate(candidates):
                 feedback.index = index
@@ -664,15 +680,29 @@ class LensPlannerNode(Node):
                             f'deg: {response.message}')
                         break
             if sun is None:
-                raise GoalFailed(f'the spot was not found at any of {len(candidates)} azimuth '
-                                 'guesses (clouds? the camera? the marker?)')
+                raise GoalFailed(
+                    f'the spot was not found at any of {len(candidates)} azimuth guesses '
+                    f'({sun_sweep.azimuth_runs(covered, step)} from the robot x axis; clouds? '
+                    'the camera? the marker?)' + (f'; {no_view}: a sun there cannot be seen '
+                                                  'at this elevation' if blind else ''))
         poses = sun_sweep.sweep_poses(self.rig, T_robot_world, sun, camera, self.marker_side,
                                       self.view_points, request.poses or self.sweep_count,
                                       tuple(self.sweep_tilts),
                                       tuple(self.sweep_distances), self.view_margin,
-                                      need_marker=not self.world_calibrated)
+                                      need_marker=not self.world_calibrated,
+                                      max_view_angle=self.max_view_angle)
         if len(poses) < 2:
-            raise GoalFailed(f'only {len(poses)} sweep poses show the marker and the spot')
+            elevation = math.degrees(math.asin(max(-1.0, min(1.0, -sun[2] / np.linalg.norm(
+                sun)))))
+            azimuth = math.degrees(math.atan2(-sun[1], -sun[0])) % 360.0
+            raise GoalFailed(
+                f'only {len(poses)} sweep poses show the camera the spot'
+                + ('' if self.world_calibrated else ' and the marker')
+                + f' within {math.degrees(self.max_view_angle):.0f} deg of the panel normal for '
+                f'the sun {elevation:.1f} deg up, {azimuth:.0f} deg from the robot x axis: the '
+                'lens tilted to face a low sun on this side puts the camera below it, and the '
+                'lens yaw servo cannot turn it to the sun side (README: which suns the rig '
+                'sees); turn the robot or wait for a higher sun')
         feedback.phase, feedback.total = 'sweeping', len(poses)
         used = swept = 0
         for index, x in enumerate(poses):
@@ -777,7 +807,8 @@ class LensPlannerNode(Node):
                                                   float(d_lp)).x
                 return x is not None and sun_sweep.sees_marker_and_spot(
                     self.rig, x, sun, camera, T_robot_world, self.marker_side,
-                    self.view_margin, need_marker=not self.world_calibrated)
+                    self.view_margin, max_view_angle=self.max_view_angle,
+                    need_marker=not self.world_calibrated)
             if not all(seen(d) for d in near):
                 continue
             count = sum(seen(d) for d in probe)

@@ -7,7 +7,7 @@ that a level lens cannot.
 
 import math
 
-from helio_control.sun_sweep import acquisition_poses, in_view, marker_corners
+from helio_control.sun_sweep import acquisition_poses, azimuth_runs, in_view, marker_corners
 from helio_control.sun_sweep import sees_marker_and_spot, spot_separation, sun_ray
 from helio_control.sun_sweep import sweep_poses, tilted_axis, view_points
 from helio_optics.geometry import invert_transform, PinholeCamera
@@ -155,3 +155,42 @@ def test_a_low_sun_is_looked_for_from_above_not_along_the_panel(rig):
     print(f'\n26 deg sun: the camera of the acquisition pose {height * 100:.1f} cm up, its sight '
           f'line {sight:.1f} deg off the normal')
     assert sight <= 65.0 and height > 0.04
+
+
+def test_a_low_sun_in_front_of_the_arm_cannot_be_seen(rig):
+    # 25 deg up, along the robot's x axis: the lens axis tilts 65 deg towards +x. The wrist
+    # solution with the camera (on the lens frame's +x) above the lens needs the lens yaw
+    # servo near 180 deg, outside its +-90 deg; the one within reach lowers the camera to the
+    # panel's height. Figures from the rig model, independent of the pose search.
+    T = rig.parameters.T_robot_world
+    elevation = math.radians(25.0)
+    sun = sun_ray(elevation, 0.0)
+    lo, hi = rig.parameters.yaw_limits
+    within, beyond = [], []
+    for point in ((0.02, 0.08), (0.08, 0.02), (0.12, 0.12)):
+        centre = T[:3, :3] @ np.array([*point, 0.0]) + T[:3, 3] - 0.082 * sun
+        heading = math.atan2(centre[1], centre[0])
+        for flip in (0.0, math.pi):
+            yaw, pitch = rig.yaw_pitch_for_axis(-sun, heading + flip)
+            x = rig.inverse(centre, yaw, pitch, check_limits=False)
+            seen_from = camera_height_and_sight(rig, x, sun)
+            (within if lo <= x[3] <= hi else beyond).append(seen_from)
+    assert within and beyond
+    assert all(height < 0.01 and sight > 85.0 for height, sight in within)
+    assert all(height > 0.05 and sight < 45.0 for height, sight in beyond)
+    assert sweep_poses(rig, T, sun, CAMERA, MARKER_SIDE, POINTS, need_marker=False) == []
+    # the acquisition leaves such guesses out; those it keeps have the sun behind or beside
+    found = acquisition_poses(rig, T, elevation, CAMERA, MARKER_SIDE, POINTS,
+                              math.radians(30.0), need_marker=False)
+    kept = {round(math.degrees(azimuth)) for azimuth, _ in found}
+    assert not kept & {0, 30, 330} and {90, 120, 180, 240} <= kept
+    # the same sun 75 deg up is seen: the camera below a lens tilted 15 deg looks 41 deg off
+    assert sweep_poses(rig, T, sun_ray(math.radians(75.0), 0.0), CAMERA, MARKER_SIDE, POINTS,
+                       need_marker=False)
+
+
+def test_azimuth_runs_name_the_guesses_in_runs_across_north():
+    step = math.radians(30.0)
+    assert azimuth_runs(np.radians([60.0, 90.0, 120.0, 240.0]), step) == '60-120, 240 deg'
+    assert azimuth_runs(np.radians([0.0, 30.0, 300.0, 330.0]), step) == '300-30 deg'
+    assert azimuth_runs([], step) == 'none'
