@@ -111,6 +111,17 @@ class JointStateBuffer:
         newest = [s[-1] for s in self._stamps.values() if s]
         return max(newest) if newest else None
 
+    def complete_until(self):
+        """
+        Return the stamp up to which every joint has samples [s] (None: a joint has none).
+
+        A lookup at a later stamp has no sample after it yet for some joint: it gets the
+        nearest older one, or fails beyond the tolerance, until the next joint state arrives.
+        """
+        if not all(self._stamps[name] for name in self.names):
+            return None
+        return min(self._stamps[name][-1] for name in self.names)
+
     def at(self, stamp, tolerance):
         """
         Return the joints at `stamp` [s] (JointLookup).
@@ -144,6 +155,35 @@ class JointStateBuffer:
                                    gap=gaps[nearest])
             positions.append(values[nearest])
             worst = max(worst, gaps[nearest])
+        return JointLookup(positions=np.array(positions), gap=worst)
+
+    def held(self, stamp, span, tolerance):
+        """
+        Return the joints at `stamp` [s] when every joint held still across it (JointLookup).
+
+        Each joint needs a sample before and one after `stamp`, both within `span` [s], that
+        differ by at most `tolerance`: the joint did not move between them, so its value at
+        `stamp` is known however sparse the samples (a loaded machine, a simulated clock
+        running faster than the drivers' wall-clock polling). Otherwise the lookup fails,
+        naming the joint.
+        """
+        stamp = float(stamp)
+        positions, worst = [], 0.0
+        for name in self.names:
+            stamps, values = self._stamps[name], self._values[name]
+            index = bisect.bisect_left(stamps, stamp)
+            if index < len(stamps) and stamps[index] == stamp:
+                positions.append(values[index])
+                continue
+            if index == 0 or index == len(stamps):
+                return JointLookup(reason=f'no {name} sample on both sides of the asked time')
+            before, after = index - 1, index
+            gap = max(stamp - stamps[before], stamps[after] - stamp)
+            if gap > span or abs(values[after] - values[before]) > tolerance:
+                return JointLookup(reason=f'{name} moved or its samples are {gap:.3f} s from '
+                                          'the asked time', gap=gap)
+            positions.append(values[before])
+            worst = max(worst, gap)
         return JointLookup(positions=np.array(positions), gap=worst)
 
     def latest(self, now, max_age=0.0):
