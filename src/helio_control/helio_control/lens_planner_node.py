@@ -191,6 +191,10 @@ class LensPlannerNode(Node):
             self, 'sweep.distances', [0.076, 0.082, 0.088],
             'Lens-panel distances of the sweep, near the focus where the spot model holds '
             '[m].')
+        self.sweep_rounds = declare(
+            self, 'sweep.rounds', 2,
+            'Sweeps at most: a sweep whose estimate is not trustworthy is repeated around its '
+            'own estimate [-].', 1, 10)
         self.acquire_step = declare(self, 'sweep.acquire_azimuth_step_deg', 30.0,
                                     'Azimuth step of the search for the spot [deg].', 1.0, 180.0)
         self.focus_sweep = (declare(self, 'focal_calibration.d_min', 0.064,
@@ -691,6 +695,30 @@ class LensPlannerNode(Node):
                     f'({sun_sweep.azimuth_runs(covered, step)} from the robot x axis; clouds? '
                     'the camera? the marker?)' + (f'; {no_view}: a sun there cannot be seen '
                                                   'at this elevation' if blind else ''))
+        for round_ in range(1, self.sweep_rounds + 1):
+            response, used, swept, poses = await self._sweep_round(
+                goal_handle, request, camera, sun, feedback, observations)
+            observations += len(swept)
+            result.estimate = response.estimate
+            result.poses_used, result.observations = used, len(swept)
+            direction = point_to_array(response.estimate.direction)
+            if response.success or round_ == self.sweep_rounds \
+                    or not np.all(np.isfinite(direction)) or not np.any(direction):
+                break
+            # a sweep planned around a coarse sun from one acquisition pose (measured 15 deg
+            # off under a 58 deg sun) fits no sun well; its own minimum is far closer: again
+            self.get_logger().warning(f'sweep round {round_}: {response.message}; sweeping '
+                                      'again around its estimate')
+            sun = direction
+        if not response.success:
+            raise GoalFailed(f'estimate_sun after the sweep: {response.message}')
+        self.sun = response.estimate
+        result.message = (f'{used} of {len(poses)} sweep poses saw the spot, {len(swept)} '
+                          f'observations (round {round_}): {response.message}')
+
+    async def _sweep_round(self, goal_handle, request, camera, sun, feedback, observations):
+        """Sweep around `sun`; return (estimate_sun response, poses used, frames, poses)."""
+        T_robot_world = self.rig.parameters.T_robot_world
         poses = sun_sweep.sweep_poses(self.rig, T_robot_world, sun, camera, self.marker_side,
                                       self.view_points, request.poses or self.sweep_count,
                                       tuple(self.sweep_tilts),
@@ -725,16 +753,10 @@ class LensPlannerNode(Node):
         feedback.phase = 'estimating'
         goal_handle.publish_feedback(feedback)
         # the sweep's own observations: those of the acquisition were taken with the lens
-        # aimed at an azimuth guess, often tens of degrees off the sun, where the spot is comatic
-        # and the model's centre millimetres off (2 mm measured at 27 deg off, 26 deg up)
+        # aimed at an azimuth guess, often tens of degrees off the sun, where the spot is
+        # comatic and the model's centre millimetres off (2 mm measured at 27 deg off, 26 up)
         response = await self._estimate(request.method, swept)
-        result.estimate = response.estimate
-        result.poses_used, result.observations = used, len(swept)
-        if not response.success:
-            raise GoalFailed(f'estimate_sun after the sweep: {response.message}')
-        self.sun = response.estimate
-        result.message = (f'{used} of {len(poses)} sweep poses saw the spot, {len(swept)} '
-                          f'observations: {response.message}')
+        return response, used, swept, poses
 
     # ---- focal calibration ------------------------------------------------------------------
 

@@ -170,10 +170,10 @@ class SpotDetectorNode(Node):
         self.joint_wait = declare(
             self, 'joint_wait', 1.0,
             'An image stamped after the newest joint state of some joint waits for the next '
-            'one at most this long on the node clock; joints that held still (within '
+            'one until an image this much newer arrived; joints that held still (within '
             'marker.joint_tolerance) between samples this close to the image are known at its '
             'stamp; 0: neither [s].', 0.0, 10.0)
-        self.max_waiting = declare(self, 'max_waiting_frames', 4,
+        self.max_waiting = declare(self, 'max_waiting_frames', 8,
                                    'At most this many images wait for joint states [-].', 1,
                                    100)
         lens, _ = declare_lens(self)
@@ -263,9 +263,10 @@ class SpotDetectorNode(Node):
 
         The drivers poll on the wall clock: under a simulated clock running faster, or a
         loaded machine, the newest joint state can be older than joint_state_tolerance when
-        an image arrives, though the next one is on its way (measured at 4x real time: most
-        frames of a sweep had no joints, so no kinematic camera pose). Such an image waits for
-        it, joint_wait at most, in order with those after it.
+        an image is processed, though the next one is on its way (measured at 4x real time:
+        most frames of a sweep had no joints, so no kinematic camera pose). Such an image waits
+        for it (until an image joint_wait newer arrives, max_waiting_frames at most), in order
+        with those after it.
         """
         while self._waiting:
             msg, stamp = self._waiting[0]
@@ -281,7 +282,9 @@ class SpotDetectorNode(Node):
             return False
         if self._joints_at(stamp):
             return False
-        return self.node_seconds() - stamp <= self.joint_wait
+        # measured on the images' stamps, not the node clock: a detector that lags behind a
+        # loaded machine would otherwise let every frame go without waiting
+        return self._waiting[-1][1] - stamp <= self.joint_wait
 
     def _joints_at(self, stamp):
         """
