@@ -191,10 +191,6 @@ class LensPlannerNode(Node):
             self, 'sweep.distances', [0.076, 0.082, 0.088],
             'Lens-panel distances of the sweep, near the focus where the spot model holds '
             '[m].')
-        self.sweep_rounds = declare(
-            self, 'sweep.rounds', 2,
-            'Sweeps at most: a sweep whose estimate is not trustworthy is repeated around its '
-            'own estimate [-].', 1, 10)
         self.acquire_step = declare(self, 'sweep.acquire_azimuth_step_deg', 30.0,
                                     'Azimuth step of the search for the spot [deg].', 1.0, 180.0)
         self.focus_sweep = (declare(self, 'focal_calibration.d_min', 0.064,
@@ -639,6 +635,38 @@ class LensPlannerNode(Node):
         return await self.estimator.call_async(EstimateSun.Request(
             method=method, stamps=[message.header.stamp for message in seen]))
 
+    async def _refine_coarse_sun(self, goal_handle, request, camera, sun, rounds=3):
+        """
+        Aim the lens at the coarse sun and estimate again, until it moves less than 2 deg.
+
+        A spot seen from a guess far off the sun (the lens 40 deg off axis) is comatic and
+        its one-pose sun came out 11-15 deg off; a sweep planned around it fits no sun.
+        """
+        T_robot_world = self.rig.parameters.T_robot_world
+        for _ in range(rounds):
+            aimed = next(sun_sweep.candidate_poses(
+                self.rig, T_robot_world, sun, camera, self.marker_side, self.view_points,
+                (self.heating_distance - 0.016, self.heating_distance + 0.03),
+                margin=self.view_margin, need_marker=not self.world_calibrated,
+                max_view_angle=self.max_view_angle), None)
+            if aimed is None:
+                return sun
+            await self._move(goal_handle, aimed[0])
+            seen = await self._observe(goal_handle, self.observe_frames)
+            if not seen:
+                return sun
+            response = await self._estimate(request.method, seen)
+            if not response.estimate.converged:
+                return sun
+            better = point_to_array(response.estimate.direction)
+            moved = math.degrees(math.acos(max(-1.0, min(1.0, float(
+                better @ sun / (np.linalg.norm(better) * np.linalg.norm(sun)))))))
+            self.get_logger().info(f'coarse sun re-aimed: moved {moved:.2f} deg')
+            sun = better
+            if moved < 2.0:
+                break
+        return sun
+
     async def _execute_sweep_sun(self, goal_handle, result):
         request = goal_handle.request
         camera = await self._need_camera()
@@ -688,6 +716,8 @@ class LensPlannerNode(Node):
                         self.get_logger().info(
                             f'spot found with the azimuth guess {math.degrees(azimuth):.0f} '
                             f'deg: {response.message}')
+                        sun = await self._refine_coarse_sun(goal_handle, request, camera,
+                                                            sun)
                         break
             if sun is None:
                 raise GoalFailed(
@@ -695,30 +725,6 @@ class LensPlannerNode(Node):
                     f'({sun_sweep.azimuth_runs(covered, step)} from the robot x axis; clouds? '
                     'the camera? the marker?)' + (f'; {no_view}: a sun there cannot be seen '
                                                   'at this elevation' if blind else ''))
-        for round_ in range(1, self.sweep_rounds + 1):
-            response, used, swept, poses = await self._sweep_round(
-                goal_handle, request, camera, sun, feedback, observations)
-            observations += len(swept)
-            result.estimate = response.estimate
-            result.poses_used, result.observations = used, len(swept)
-            direction = point_to_array(response.estimate.direction)
-            if response.success or round_ == self.sweep_rounds \
-                    or not np.all(np.isfinite(direction)) or not np.any(direction):
-                break
-            # a sweep planned around a coarse sun from one acquisition pose (measured 15 deg
-            # off under a 58 deg sun) fits no sun well; its own minimum is far closer: again
-            self.get_logger().warning(f'sweep round {round_}: {response.message}; sweeping '
-                                      'again around its estimate')
-            sun = direction
-        if not response.success:
-            raise GoalFailed(f'estimate_sun after the sweep: {response.message}')
-        self.sun = response.estimate
-        result.message = (f'{used} of {len(poses)} sweep poses saw the spot, {len(swept)} '
-                          f'observations (round {round_}): {response.message}')
-
-    async def _sweep_round(self, goal_handle, request, camera, sun, feedback, observations):
-        """Sweep around `sun`; return (estimate_sun response, poses used, frames, poses)."""
-        T_robot_world = self.rig.parameters.T_robot_world
         poses = sun_sweep.sweep_poses(self.rig, T_robot_world, sun, camera, self.marker_side,
                                       self.view_points, request.poses or self.sweep_count,
                                       tuple(self.sweep_tilts),
@@ -753,10 +759,16 @@ class LensPlannerNode(Node):
         feedback.phase = 'estimating'
         goal_handle.publish_feedback(feedback)
         # the sweep's own observations: those of the acquisition were taken with the lens
-        # aimed at an azimuth guess, often tens of degrees off the sun, where the spot is
-        # comatic and the model's centre millimetres off (2 mm measured at 27 deg off, 26 up)
+        # aimed at an azimuth guess, often tens of degrees off the sun, where the spot is comatic
+        # and the model's centre millimetres off (2 mm measured at 27 deg off, 26 deg up)
         response = await self._estimate(request.method, swept)
-        return response, used, swept, poses
+        result.estimate = response.estimate
+        result.poses_used, result.observations = used, len(swept)
+        if not response.success:
+            raise GoalFailed(f'estimate_sun after the sweep: {response.message}')
+        self.sun = response.estimate
+        result.message = (f'{used} of {len(poses)} sweep poses saw the spot, {len(swept)} '
+                          f'observations: {response.message}')
 
     # ---- focal calibration ------------------------------------------------------------------
 
