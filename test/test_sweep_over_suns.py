@@ -8,8 +8,8 @@ calibrates robot-world, sweeps, and its estimate is compared with the world's tr
 Lausanne: the estimate must come from the spots, not from the ephemeris (at 08:10 in Munich
 the controller's ephemeris puts the sun 3.6 deg lower than the world's).
 
-Measured over six runs (2 shared cores, load 5-10): 0.08-0.18 deg off at 26.3 deg up (08:10,
-the sun 117 deg from the robot's x axis), 0.10-0.16 deg at 25.4 deg (18:24, 226 deg),
+Measured over seven runs (2 shared cores, load 2-10): 0.08-0.23 deg off at 26.3 deg up (08:10,
+the sun 117 deg from the robot's x axis), 0.10-0.18 deg at 25.4 deg (18:24, 226 deg),
 0.09-0.19 deg at 31 deg, 0.02-0.07 deg at 44 deg and 0.01-0.08 deg at 75 deg.
 
 Before the sweep saw low suns, at 26 deg the acquisition found no spot at any of its 12
