@@ -354,6 +354,21 @@ def heat_sinks(theta, moisture, unpyrolysed, volumes, cells, dt, rho_c, boiling,
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
+def _bilinear_rise(surface, k, columns, wx, wy):
+    """Return the bilinear mix of `surface` at k, k + 1, k + columns, k + columns + 1."""
+    low_x, low_y = 1 - wx, 1 - wy
+    return (low_y * (low_x * surface[k] + wx * surface[k + 1])
+            + wy * (low_x * surface[k + columns] + wx * surface[k + columns + 1]))
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def _counts(value, noise, sigma, floor, cap):
+    """Return the read-out of `value` [degC]: + sigma noise, clipped, uint16 centikelvin."""
+    value = min(max(value + sigma * noise, floor), cap)
+    return np.uint16(min(max(np.rint((value + 273.15) * 100.0), 0.0), 65535.0))
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
 def thermal_counts(seen_position, corner, columns, wx, wy, inside, surface, far, ambient,
                    noise, sigma, floor, cap, out):
     """
@@ -373,18 +388,11 @@ def thermal_counts(seen_position, corner, columns, wx, wy, inside, surface, far,
             value = ambient
             if q >= 0:
                 if inside[q]:
-                    k = corner[q]
-                    low_x, low_y = 1 - wx[q], 1 - wy[q]
-                    rise = (low_y * (low_x * surface[k] + wx[q] * surface[k + 1])
-                            + wy[q] * (low_x * surface[k + columns]
-                                       + wx[q] * surface[k + columns + 1]))
+                    rise = _bilinear_rise(surface, corner[q], columns, wx[q], wy[q])
                 else:
                     rise = far
                 value = ambient + rise
-            value = value + sigma * noise[r, c]
-            value = min(max(value, floor), cap)
-            counts = np.rint((value + 273.15) * 100.0)
-            out[r, c] = np.uint16(min(max(counts, 0.0), 65535.0))
+            out[r, c] = _counts(value, noise[r, c], sigma, floor, cap)
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
@@ -496,18 +504,11 @@ def thermal_counts_at(x, y, x_centres, y_centres, bounds, surface, far, ambient,
                         and py <= bounds[3]):
                     ix, wx = _axis_weight(x_centres, px)
                     iy, wy = _axis_weight(y_centres, py)
-                    k = iy * columns + ix
-                    low_x, low_y = 1 - wx, 1 - wy
-                    rise = (low_y * (low_x * surface[k] + wx * surface[k + 1])
-                            + wy * (low_x * surface[k + columns]
-                                    + wx * surface[k + columns + 1]))
+                    rise = _bilinear_rise(surface, iy * columns + ix, columns, wx, wy)
                 else:
                     rise = far
                 value = ambient + rise
-            value = value + sigma * noise[r, c]
-            value = min(max(value, floor), cap)
-            counts = np.rint((value + 273.15) * 100.0)
-            out[r, c] = np.uint16(min(max(counts, 0.0), 65535.0))
+            out[r, c] = _counts(value, noise[r, c], sigma, floor, cap)
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
