@@ -156,11 +156,6 @@ class LensPlannerNode(Node):
         self.view_margin = declare(self, 'view_margin', 30.0,
                                    'Marker and spot must lie this far inside the image '
                                    '[px].', 0.0, 500.0)
-        self.max_view_angle = math.radians(declare(
-            self, 'max_view_angle_deg', math.degrees(sun_sweep.MAX_VIEW_ANGLE),
-            'The camera must see the marker and the spot no more obliquely than this from '
-            "the panel's normal; a sight line along the wood shows the spot a few pixels high "
-            '[deg].', 10.0, 89.0))
         self.observe_frames = declare(self, 'observe_frames', 4,
                                       'Spot observations collected per pose [-].', 1, 100)
         self.observe_timeout = declare(self, 'observe_timeout', 10.0,
@@ -633,50 +628,12 @@ class LensPlannerNode(Node):
 
     # ---- sun sweep -------------------------------------------------------------------------
 
-    async def _estimate(self, method, seen):
-        """
-        Call estimate_sun on the spot observations `seen` (this node's, by image stamp).
-
-        Only those: the estimator also keeps the frames taken while the arm moved (the joints
-        interpolated between samples 0.2 s apart, the camera between poses), which came out
-        2-9 mm off the fit and were a fifth of the last observations.
-        """
+    async def _estimate(self, method, observations=0):
+        """Call estimate_sun on the last `observations` spots (0: all the estimator keeps)."""
         await self._discovered(self.estimator.service_is_ready,
                                'estimate_sun (is sun_estimator running?)')
         return await self.estimator.call_async(EstimateSun.Request(
-            method=method, stamps=[message.header.stamp for message in seen]))
-
-    async def _refine_coarse_sun(self, goal_handle, request, camera, sun, rounds=3):
-        """
-        Aim the lens at the coarse sun and estimate again, until it moves less than 2 deg.
-
-        A spot seen from a guess far off the sun (the lens 40 deg off axis) is comatic and
-        its one-pose sun came out 11-15 deg off; a sweep planned around it fits no sun.
-        """
-        T_robot_world = self.rig.parameters.T_robot_world
-        for _ in range(rounds):
-            aimed = next(sun_sweep.candidate_poses(
-                self.rig, T_robot_world, sun, camera, self.marker_side, self.view_points,
-                (self.heating_distance - 0.016, self.heating_distance + 0.03),
-                margin=self.view_margin, need_marker=not self.world_calibrated,
-                max_view_angle=self.max_view_angle), None)
-            if aimed is None:
-                return sun
-            await self._move(goal_handle, aimed[0])
-            seen = await self._observe(goal_handle, self.observe_frames)
-            if not seen:
-                return sun
-            response = await self._estimate(request.method, seen)
-            if not response.estimate.converged:
-                return sun
-            better = point_to_array(response.estimate.direction)
-            moved = math.degrees(math.acos(max(-1.0, min(1.0, float(
-                better @ sun / (np.linalg.norm(better) * np.linalg.norm(sun)))))))
-            self.get_logger().info(f'coarse sun re-aimed: moved {moved:.2f} deg')
-            sun = better
-            if moved < 2.0:
-                break
-        return sun
+            method=method, max_observations=int(observations)))
 
     async def _execute_sweep_sun(self, goal_handle, result):
         request = goal_handle.request
@@ -695,21 +652,10 @@ class LensPlannerNode(Node):
                 self.view_points, math.radians(self.acquire_step),
                 (self.heating_distance - 0.016, self.heating_distance - 0.022,
                  self.heating_distance + 0.03), margin=self.view_margin,
-                need_marker=not self.world_calibrated, max_view_angle=self.max_view_angle)
-            step = math.radians(self.acquire_step)
-            guesses = np.arange(0.0, 2.0 * math.pi - 1e-9, step)
-            covered = [azimuth for azimuth, _ in candidates]
-            blind = [a for a in guesses
-                     if not any(abs(math.remainder(a - c, 2.0 * math.pi)) < 1e-6
-                                for c in covered)]
-            # why a guess has no pose: for a low sun the tilted lens puts the camera below it
-            # wherever the lens yaw servo cannot turn it to the sun's side (README)
-            no_view = (f'for a sun {math.degrees(elevation):.1f} deg up (ephemeris), no pose '
-                       f'sees the spot within {math.degrees(self.max_view_angle):.0f} deg of '
-                       "the panel's normal at the azimuth guesses "
-                       f'{sun_sweep.azimuth_runs(blind, step)} from the robot x axis')
+                need_marker=not self.world_calibrated)
             if not candidates:
-                raise GoalFailed(f'no pose to look for the spot: {no_view}')
+                raise GoalFailed('no pose to look for the spot: the view points are out of '
+                                 'reach or out of the camera view for this sun elevation')
             feedback.phase, feedback.total = 'acquiring', len(candidates)
             for index, (azimuth, x) in enumerate(candidates):
                 feedback.index = index
@@ -721,64 +667,42 @@ class LensPlannerNode(Node):
                 if seen:
                     # a coarse sun is enough to choose the sweep: one pose's estimate may be
                     # ambiguous (a twin sun), which the tilted sweep then settles
-                    response = await self._estimate(request.method, seen)
+                    response = await self._estimate(request.method, len(seen))
                     if response.estimate.converged:
                         sun = point_to_array(response.estimate.direction)
                         self.get_logger().info(
                             f'spot found with the azimuth guess {math.degrees(azimuth):.0f} '
                             f'deg: {response.message}')
-                        sun = await self._refine_coarse_sun(goal_handle, request, camera,
-                                                            sun)
                         break
             if sun is None:
-                raise GoalFailed(
-                    f'the spot was not found at any of {len(candidates)} azimuth guesses '
-                    f'({sun_sweep.azimuth_runs(covered, step)} from the robot x axis; clouds? '
-                    'the camera? the marker?)' + (f'; {no_view}: a sun there cannot be seen '
-                                                  'at this elevation' if blind else ''))
+                raise GoalFailed(f'the spot was not found at any of {len(candidates)} azimuth '
+                                 'guesses (clouds? the camera? the marker?)')
         poses = sun_sweep.sweep_poses(self.rig, T_robot_world, sun, camera, self.marker_side,
                                       self.view_points, request.poses or self.sweep_count,
                                       tuple(self.sweep_tilts),
                                       tuple(self.sweep_distances), self.view_margin,
-                                      need_marker=not self.world_calibrated,
-                                      max_view_angle=self.max_view_angle)
+                                      need_marker=not self.world_calibrated)
         if len(poses) < 2:
-            elevation = math.degrees(math.asin(max(-1.0, min(1.0, -sun[2] / np.linalg.norm(
-                sun)))))
-            azimuth = math.degrees(math.atan2(-sun[1], -sun[0])) % 360.0
-            raise GoalFailed(
-                f'only {len(poses)} sweep poses show the camera the spot'
-                + ('' if self.world_calibrated else ' and the marker')
-                + f' within {math.degrees(self.max_view_angle):.0f} deg of the panel normal for '
-                f'the sun {elevation:.1f} deg up, {azimuth:.0f} deg from the robot x axis: the '
-                'lens tilted to face a low sun on this side puts the camera below it, and the '
-                'lens yaw servo cannot turn it to the sun side (README: which suns the rig '
-                'sees); turn the robot or wait for a higher sun')
+            raise GoalFailed(f'only {len(poses)} sweep poses show the marker and the spot')
         feedback.phase, feedback.total = 'sweeping', len(poses)
-        used, swept = 0, []
+        used = 0
         for index, x in enumerate(poses):
             feedback.index = index
             goal_handle.publish_feedback(feedback)
             await self._move(goal_handle, x)
             seen = await self._observe(goal_handle, self.observe_frames)
-            swept += seen
+            observations += len(seen)
             used += bool(seen)
-            feedback.observations = observations + len(swept)
-        if not swept:
-            raise GoalFailed(f'none of the {len(poses)} sweep poses saw the spot (see the '
-                             "log for the spot detector's reasons)")
+            feedback.observations = observations
         feedback.phase = 'estimating'
         goal_handle.publish_feedback(feedback)
-        # the sweep's own observations: those of the acquisition were taken with the lens
-        # aimed at an azimuth guess, often tens of degrees off the sun, where the spot is comatic
-        # and the model's centre millimetres off (2 mm measured at 27 deg off, 26 deg up)
-        response = await self._estimate(request.method, swept)
+        response = await self._estimate(request.method, observations)
         result.estimate = response.estimate
-        result.poses_used, result.observations = used, len(swept)
+        result.poses_used, result.observations = used, observations
         if not response.success:
             raise GoalFailed(f'estimate_sun after the sweep: {response.message}')
         self.sun = response.estimate
-        result.message = (f'{used} of {len(poses)} sweep poses saw the spot, {len(swept)} '
+        result.message = (f'{used} of {len(poses)} sweep poses saw the spot, {observations} '
                           f'observations: {response.message}')
 
     # ---- focal calibration ------------------------------------------------------------------
@@ -858,8 +782,7 @@ class LensPlannerNode(Node):
                                                   float(d_lp)).x
                 return x is not None and sun_sweep.sees_marker_and_spot(
                     self.rig, x, sun, camera, T_robot_world, self.marker_side,
-                    self.view_margin, max_view_angle=self.max_view_angle,
-                    need_marker=not self.world_calibrated)
+                    self.view_margin, need_marker=not self.world_calibrated)
             if not all(seen(d) for d in near):
                 continue
             count = sum(seen(d) for d in probe)

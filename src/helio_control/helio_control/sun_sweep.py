@@ -23,9 +23,9 @@ distances, tilts off the sun in four directions and both solutions of the wrist 
 second turns the cameras to the other side of the lens): with the camera fixed beside the
 lens, only some of them show the marker and the spot for a given sun.
 
-No rclpy. API: ``view_points``, ``in_view``, ``view_angle``, ``candidate_poses``,
-``acquisition_poses``, ``sweep_poses``, ``azimuth_runs`` (azimuth guesses for messages),
-``spot_separation`` (how far apart a set of poses casts the spots of two suns).
+No rclpy. API: ``view_points``, ``in_view``, ``candidate_poses``, ``acquisition_poses``,
+``sweep_poses``, ``spot_separation`` (how far apart a set of poses casts the spots of two
+suns).
 """
 
 import math
@@ -34,10 +34,6 @@ from helio_control.lens_moves import focus_point
 from helio_optics.geometry import direction_from_angles, invert_transform, transform_points
 from helio_optics.rig_kinematics import UnreachableError
 import numpy as np
-
-# The camera must see the marker and the spot no more obliquely than this from the panel's
-# normal (the lens planner's max_view_angle_deg overrides it) [rad]
-MAX_VIEW_ANGLE = math.radians(65.0)
 
 
 def marker_corners(marker_side):
@@ -81,41 +77,33 @@ def in_lens_shadow(points_world, T_world_lens, sun_world, shadow_radius):
     return (distance > 0.0) & (np.linalg.norm(crossing - centre, axis=1) <= shadow_radius)
 
 
-def view_angle(T_world_camera, point):
-    """Return the angle [rad] between the panel's normal and the sight line from `point`."""
-    to_camera = T_world_camera[:3, 3] - np.asarray(point, dtype=float)
-    return math.acos(max(-1.0, min(1.0, float(to_camera[2] / np.linalg.norm(to_camera)))))
-
-
 def sees_marker_and_spot(rig, x, sun, camera, T_robot_world, marker_side, margin,
                          shadow_radius=0.022, min_marker_pixels=40.0,
-                         max_view_angle=MAX_VIEW_ANGLE, need_marker=True):
+                         max_view_angle=math.radians(65.0), need_marker=True):
     """
     Return whether joints x show the camera the marker and the spot's centre ray.
 
-    The point where the ray through the lens centre meets the panel must lie in the image
-    (`margin` [px]) and be seen no more obliquely than `max_view_angle` from the panel's
-    normal: the camera rides beside the lens, and for a low sun one wrist solution lowers it
-    to the panel's height, where the panel is a sliver a few pixels high and the spot borders
-    the dark beyond it. The whole marker must lie in the image too, span at least
-    `min_marker_pixels` on each side, be seen no more obliquely than `max_view_angle`, and
-    stand outside the lens shadow. Without `need_marker` (the spot detector maps the spot
-    through the kinematic camera pose once the rig is calibrated) only the spot is checked.
+    The whole marker must lie in the image (`margin` [px]), span at least
+    `min_marker_pixels` on each side, be seen no more obliquely than `max_view_angle` from
+    the panel's normal, and stand outside the lens shadow; the point where the ray through
+    the lens centre meets the panel must lie in the image too. Without `need_marker` (the
+    spot detector maps the spot through the kinematic camera pose once the rig is
+    calibrated) only the spot is checked.
     """
     T_robot_world = np.asarray(T_robot_world, dtype=float)
     T_world_robot = invert_transform(T_robot_world)
     pose = rig.forward(x)
     T_world_rgb = T_world_robot @ pose.T_robot_rgb
     spot, _ = focus_point(rig, x, sun, T_robot_world)
-    if spot is None or not in_view(camera, T_world_rgb, [spot], margin) \
-            or view_angle(T_world_rgb, spot) > max_view_angle:
+    corners = marker_corners(marker_side)
+    if spot is None or not in_view(camera, T_world_rgb, [spot], margin):
         return False
     if not need_marker:
         return True
-    corners = marker_corners(marker_side)
     if not in_view(camera, T_world_rgb, corners, margin):
         return False
-    if view_angle(T_world_rgb, np.zeros(3)) > max_view_angle:     # marker at the origin
+    to_camera = T_world_rgb[:3, 3] / np.linalg.norm(T_world_rgb[:3, 3])   # marker at origin
+    if math.acos(max(-1.0, min(1.0, float(to_camera[2])))) > max_view_angle:
         return False
     pixels = camera.project(transform_points(invert_transform(T_world_rgb), corners))
     sides = np.linalg.norm(pixels - np.roll(pixels, 1, axis=0), axis=1)
@@ -163,8 +151,7 @@ def view_points(panel_extent=(-0.04, 0.16, -0.04, 0.16), spacing=0.02,
 
 def candidate_poses(rig, T_robot_world, sun, camera, marker_side, points,
                     distances=(0.082,), tilts=(0.0,), turns=(0.0, 90.0, 180.0, 270.0),
-                    offsets=(0.0,), margin=30.0, need_marker=True,
-                    max_view_angle=MAX_VIEW_ANGLE):
+                    offsets=(0.0,), margin=30.0, need_marker=True):
     """
     Yield (joints, (point, distance, tilt, turn, offset)) that show the marker and the spot.
 
@@ -191,78 +178,35 @@ def candidate_poses(rig, T_robot_world, sun, camera, marker_side, points,
                                 continue
                             if sees_marker_and_spot(rig, x, sun, camera, T_robot_world,
                                                     marker_side, margin,
-                                                    max_view_angle=max_view_angle,
                                                     need_marker=need_marker):
                                 yield x, (tuple(point), distance, tilt, turn, offset)
 
 
 def acquisition_poses(rig, T_robot_world, elevation, camera, marker_side, points,
                       azimuth_step=math.radians(30.0), distances=(0.082, 0.06, 0.11),
-                      tilts=(0.0, 15.0, 30.0), margin=30.0, need_marker=True,
-                      max_view_angle=MAX_VIEW_ANGLE):
+                      tilts=(0.0, 15.0, 30.0), margin=30.0, need_marker=True):
     """
     Return [(azimuth guess [rad], joints)] to look for the spot with an unknown heading.
 
-    For each guessed azimuth (a ring of `azimuth_step`), the pose from which the camera
-    would see the spot (and the marker, with `need_marker`) were the guess right: of the
-    first (distance, tilt) in the order given (aligned with the guess and focused first,
-    then closer, farther and tilted) that has such poses at some panel point, the one that
-    sees the spot least obliquely (the sharpest image of it, farthest from the panel's
-    edge as the camera sees it). A guess with no such pose is left out.
+    For each guessed azimuth (a ring of `azimuth_step`), the first candidate pose (aligned
+    with the guess and focused first, then closer, farther and tilted) from which the camera
+    would see the marker and the spot were the guess right. A guess with no such pose is
+    left out.
     """
-    T_robot_world = np.asarray(T_robot_world, dtype=float)
-    T_world_robot = invert_transform(T_robot_world)
     found = []
     for azimuth in np.arange(0.0, 2.0 * math.pi - 1e-9, azimuth_step):
         sun = sun_ray(elevation, azimuth)
-        for distance in distances:
-            best = None
-            for tilt in tilts:
-                for x, _ in candidate_poses(rig, T_robot_world, sun, camera, marker_side,
-                                            points, (distance,), (tilt,), margin=margin,
-                                            need_marker=need_marker,
-                                            max_view_angle=max_view_angle):
-                    spot, _ = focus_point(rig, x, sun, T_robot_world)
-                    angle = view_angle(T_world_robot @ rig.forward(x).T_robot_rgb, spot)
-                    if best is None or angle < best[0]:
-                        best = (angle, x)
-                if best is not None:
-                    break
-            if best is not None:
-                found.append((float(azimuth), best[1]))
-                break
+        first = next(candidate_poses(rig, T_robot_world, sun, camera, marker_side, points,
+                                     distances, tilts, margin=margin,
+                                     need_marker=need_marker), None)
+        if first is not None:
+            found.append((float(azimuth), first[0]))
     return found
-
-
-def azimuth_runs(azimuths, step):
-    """
-    Return the azimuths [rad] of a ring of `step` as runs, e.g. '60-240, 300 deg'.
-
-    Neighbours on the ring (0 after 330 with a 30 deg step) join one run.
-    """
-    if not len(azimuths):
-        return 'none'
-    indices = sorted({int(round(a / step)) % int(round(2.0 * math.pi / step))
-                      for a in azimuths})
-    count = int(round(2.0 * math.pi / step))
-    runs = []
-    for index in indices:
-        if runs and index == runs[-1][1] + 1:
-            runs[-1][1] = index
-        else:
-            runs.append([index, index])
-    if len(runs) > 1 and runs[0][0] == 0 and runs[-1][1] == count - 1:
-        runs[0][0] = runs.pop()[0] - count
-    words = []
-    for first, last in runs:
-        a, b = (math.degrees(i * step) % 360.0 for i in (first, last))
-        words.append(f'{a:.0f}' if first == last else f'{a:.0f}-{b:.0f}')
-    return ', '.join(words) + ' deg'
 
 
 def sweep_poses(rig, T_robot_world, sun, camera, marker_side, points, count=6,
                 tilts=(0.0, 5.0, 10.0), distances=(0.076, 0.082, 0.088), margin=30.0,
-                need_marker=True, max_view_angle=MAX_VIEW_ANGLE):
+                need_marker=True):
     """
     Return up to `count` joint vectors for the sweep around the sun estimate `sun`.
 
@@ -275,8 +219,7 @@ def sweep_poses(rig, T_robot_world, sun, camera, marker_side, points, count=6,
     """
     candidates = list(candidate_poses(rig, T_robot_world, sun, camera, marker_side, points,
                                       tuple(distances), tuple(tilts), margin=margin,
-                                      need_marker=need_marker,
-                                      max_view_angle=max_view_angle))
+                                      need_marker=need_marker))
     groups = {}
     for x, (_, _, tilt, turn, _) in candidates:
         groups.setdefault((tilt, turn), []).append(x)

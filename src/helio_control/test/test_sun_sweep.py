@@ -7,7 +7,7 @@ that a level lens cannot.
 
 import math
 
-from helio_control.sun_sweep import acquisition_poses, azimuth_runs, in_view, marker_corners
+from helio_control.sun_sweep import acquisition_poses, in_view, marker_corners
 from helio_control.sun_sweep import sees_marker_and_spot, spot_separation, sun_ray
 from helio_control.sun_sweep import sweep_poses, tilted_axis, view_points
 from helio_optics.geometry import invert_transform, PinholeCamera
@@ -120,77 +120,3 @@ def test_acquisition_aims_at_every_azimuth_guess_where_the_camera_would_see_the_
         axis = rig.forward(x).T_robot_lens[:3, 2]
         assert math.degrees(math.acos(min(1.0, float(axis @ -sun)))) < 30.0 + 1e-6
         assert sees_marker_and_spot(rig, x, sun, CAMERA, T, MARKER_SIDE, 30.0)
-
-
-def camera_height_and_sight(rig, x, sun):
-    """Return the RGB camera's height over the panel [m] and its sight angle to the spot [deg]."""
-    T = rig.parameters.T_robot_world
-    T_world_robot = invert_transform(T)
-    camera = (T_world_robot @ rig.forward(x).T_robot_rgb)[:3, 3]
-    lens = (T_world_robot @ rig.forward(x).T_robot_lens)[:3, 3]
-    sun_world = T_world_robot[:3, :3] @ sun
-    spot = lens + (-lens[2] / sun_world[2]) * sun_world      # the chief ray on the panel
-    sight = camera - spot
-    return camera[2], math.degrees(math.acos(sight[2] / np.linalg.norm(sight)))
-
-
-def test_a_low_sun_is_looked_for_from_above_not_along_the_panel(rig):
-    # 26 deg up: the lens axis tilts 64 deg, and the wrist solution that turns the camera
-    # down puts it at the panel's height, looking along the wood (the spot a few pixels high
-    # beside the dark beyond the panel); the acquisition must take the other view
-    T = rig.parameters.T_robot_world
-    elevation, azimuth = math.radians(26.0), math.radians(120.0)
-    sun = sun_ray(elevation, azimuth)
-    centre = T[:3, :3] @ np.array([-0.025, 0.135, 0.0]) + T[:3, 3] - 0.112 * sun
-    yaw, pitch = rig.yaw_pitch_for_axis(-sun, math.atan2(centre[1], centre[0]))
-    grazing = rig.inverse(centre, yaw, pitch)
-    height, sight = camera_height_and_sight(rig, grazing, sun)
-    assert height < 0.02 and sight > 80.0
-    assert not sees_marker_and_spot(rig, grazing, sun, CAMERA, T, MARKER_SIDE, 30.0,
-                                    need_marker=False)
-    found = dict(acquisition_poses(rig, T, elevation, CAMERA, MARKER_SIDE, POINTS,
-                                   math.radians(30.0), need_marker=False))
-    x = next(x for a, x in found.items() if abs(a - azimuth) < 1e-9)
-    height, sight = camera_height_and_sight(rig, x, sun)
-    print(f'\n26 deg sun: the camera of the acquisition pose {height * 100:.1f} cm up, its sight '
-          f'line {sight:.1f} deg off the normal')
-    assert sight <= 65.0 and height > 0.04
-
-
-def test_a_low_sun_in_front_of_the_arm_cannot_be_seen(rig):
-    # 25 deg up, along the robot's x axis: the lens axis tilts 65 deg towards +x. The wrist
-    # solution with the camera (on the lens frame's +x) above the lens needs the lens yaw
-    # servo near 180 deg, outside its +-90 deg; the one within reach lowers the camera to the
-    # panel's height. Figures from the rig model, independent of the pose search.
-    T = rig.parameters.T_robot_world
-    elevation = math.radians(25.0)
-    sun = sun_ray(elevation, 0.0)
-    lo, hi = rig.parameters.yaw_limits
-    within, beyond = [], []
-    for point in ((0.02, 0.08), (0.08, 0.02), (0.12, 0.12)):
-        centre = T[:3, :3] @ np.array([*point, 0.0]) + T[:3, 3] - 0.082 * sun
-        heading = math.atan2(centre[1], centre[0])
-        for flip in (0.0, math.pi):
-            yaw, pitch = rig.yaw_pitch_for_axis(-sun, heading + flip)
-            x = rig.inverse(centre, yaw, pitch, check_limits=False)
-            seen_from = camera_height_and_sight(rig, x, sun)
-            (within if lo <= x[3] <= hi else beyond).append(seen_from)
-    assert within and beyond
-    assert all(height < 0.01 and sight > 85.0 for height, sight in within)
-    assert all(height > 0.05 and sight < 45.0 for height, sight in beyond)
-    assert sweep_poses(rig, T, sun, CAMERA, MARKER_SIDE, POINTS, need_marker=False) == []
-    # the acquisition leaves such guesses out; those it keeps have the sun behind or beside
-    found = acquisition_poses(rig, T, elevation, CAMERA, MARKER_SIDE, POINTS,
-                              math.radians(30.0), need_marker=False)
-    kept = {round(math.degrees(azimuth)) for azimuth, _ in found}
-    assert not kept & {0, 30, 330} and {90, 120, 180, 240} <= kept
-    # the same sun 75 deg up is seen: the camera below a lens tilted 15 deg looks 41 deg off
-    assert sweep_poses(rig, T, sun_ray(math.radians(75.0), 0.0), CAMERA, MARKER_SIDE, POINTS,
-                       need_marker=False)
-
-
-def test_azimuth_runs_name_the_guesses_in_runs_across_north():
-    step = math.radians(30.0)
-    assert azimuth_runs(np.radians([60.0, 90.0, 120.0, 240.0]), step) == '60-120, 240 deg'
-    assert azimuth_runs(np.radians([0.0, 30.0, 300.0, 330.0]), step) == '300-30 deg'
-    assert azimuth_runs([], step) == 'none'

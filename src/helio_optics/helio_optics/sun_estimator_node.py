@@ -107,12 +107,6 @@ class SunEstimatorNode(Node):
         declare(self, 'joint_state_tolerance', 0.3,
                 'largest time between a spot image and the joint state used for it [s]',
                 0.0, 10.0, dynamic=True)
-        declare(self, 'joint_hold_span', 1.0,
-                'joints that held still (joint_still_tolerance) between samples this close to '
-                'a spot image are known at its stamp; 0: off [s]', 0.0, 10.0, dynamic=True)
-        declare(self, 'joint_still_tolerance', 1e-4,
-                'largest joint change between two samples that counts as still [rad]', 0.0,
-                0.1, dynamic=True)
         declare(self, 'gain', 0.9, 'interaction-matrix gain lambda (Eq 11) [-]', 0.01, 2.0,
                 dynamic=True)
         declare(self, 'delta', 1e-5, 'interaction-matrix step delta (Eq 12) [rad]', 1e-9, 0.1,
@@ -187,12 +181,6 @@ class SunEstimatorNode(Node):
             return
         stamp = stamp_to_seconds(message.header.stamp)
         lookup = self.joints.at(stamp, self._parameter('joint_state_tolerance'))
-        if not lookup and self._parameter('joint_hold_span') > 0.0:
-            # the arm held still across the image, between samples farther apart (a loaded
-            # machine, a simulated clock faster than the drivers' wall-clock polling)
-            held = self.joints.held(stamp, self._parameter('joint_hold_span'),
-                                    self._parameter('joint_still_tolerance'))
-            lookup = held if held else lookup
         if not lookup:
             self.get_logger().warning(f'spot skipped: {lookup.reason}',
                                       throttle_duration_sec=2.0)
@@ -217,20 +205,7 @@ class SunEstimatorNode(Node):
             response.success = False
             response.message = f'unknown method {method!r}; use one of {METHODS}'
             return response
-        if request.stamps:
-            # the client's own choice (the lens planner's frames taken with the arm still):
-            # whatever else was buffered meanwhile, e.g. frames while the arm moved, is not used
-            wanted = {(stamp.sec, stamp.nanosec) for stamp in request.stamps}
-            buffered = [b for b in self._recent_observations(0)
-                        if (b.stamp.sec, b.stamp.nanosec) in wanted]
-            if not buffered:
-                response.success = False
-                response.message = (f'none of the {len(wanted)} requested observations is '
-                                    'buffered (no joint states at their stamps, or older than '
-                                    f"{self._parameter('max_observation_age'):g} s)")
-                return response
-        else:
-            buffered = self._recent_observations(int(request.max_observations))
+        buffered = self._recent_observations(int(request.max_observations))
         if not buffered:
             response.success = False
             response.message = ('no valid spot observation with joint states in the last '

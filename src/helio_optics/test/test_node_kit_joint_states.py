@@ -150,28 +150,3 @@ def test_a_joint_state_message_is_read_from_its_header_stamp():
     assert buffer.add_message(message) == ''
     buffer.add(1700000000.5, ARM, [0.0, 0.1, 0.2, 0.0])
     assert buffer.at(1700000000.5, 0.0).positions.tolist() == [0.0, 0.1, 0.2, 0.25, -0.5]
-
-
-def test_complete_until_is_the_oldest_joints_newest_sample():
-    buffer = JointStateBuffer()
-    assert buffer.complete_until() is None
-    feed_drivers(buffer, [0.0, 0.2, 0.4], [0.0, 0.2])     # the wrist's driver lags
-    assert buffer.complete_until() == pytest.approx(0.2)
-    feed_drivers(buffer, [], [0.4, 0.6])
-    assert buffer.complete_until() == pytest.approx(0.4)
-
-
-def test_a_joint_held_still_is_known_between_sparse_samples():
-    buffer = JointStateBuffer()
-    still = [0.1, 0.2, 0.3, 0.0]
-    for t in (0.0, 0.6):                      # one sample each side, 0.6 s apart
-        buffer.add(t, ARM, still)
-        buffer.add(t, WRIST, [0.4, 0.5])
-    assert not buffer.at(0.3, 0.2)            # the nearest sample is 0.3 s away
-    lookup = buffer.held(0.3, 1.0, 1e-4)
-    assert lookup and lookup.positions == pytest.approx([0.1, 0.2, 0.3, 0.4, 0.5])
-    assert not buffer.held(0.3, 0.25, 1e-4)   # a sample farther than the span
-    assert not buffer.held(0.7, 1.0, 1e-4)    # nothing after
-    buffer.add(1.2, WRIST, [0.4, 0.7])        # the pitch moved between 0.6 and 1.2 s
-    buffer.add(1.2, ARM, still)
-    assert 'lens_pitch moved' in buffer.held(0.9, 1.0, 1e-4).reason

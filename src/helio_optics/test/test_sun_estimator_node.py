@@ -35,7 +35,6 @@ RANGES = {
     'rim_points': (8, 4096), 'contour_fraction': (0.05, 1.0),
     'centre_sigma': (1e-6, 0.05), 'max_observations': (1, 10000),
     'max_observation_age': (0.1, 1e6), 'joint_state_tolerance': (0.0, 10.0),
-    'joint_hold_span': (0.0, 10.0), 'joint_still_tolerance': (0.0, 0.1),
     'gain': (0.01, 2.0), 'delta': (1e-9, 0.1), 'tolerance': (1e-15, 1.0),
     'max_iterations': (1, 10000), 'update_period': (0.0, 3600.0),
     'fit_alpha': (1e-12, 0.5), 'outlier_alpha': (1e-15, 0.5),
@@ -45,8 +44,7 @@ RANGES = {
 # Read each time an estimate is made: may change while the node runs. Every other parameter
 # is read at start-up and declared read-only.
 DYNAMIC = {'method', 'centre_sigma', 'max_observations', 'max_observation_age',
-           'joint_state_tolerance', 'joint_hold_span', 'joint_still_tolerance', 'gain',
-           'delta', 'tolerance', 'max_iterations',
+           'joint_state_tolerance', 'gain', 'delta', 'tolerance', 'max_iterations',
            'fit_alpha', 'outlier_alpha', 'max_outlier_fraction', 'step_tolerance',
            'ambiguity_chi2', 'ambiguity_separation_deg', 'plane_tolerance',
            'min_chief_ray_elevation_deg'}
@@ -325,34 +323,3 @@ def test_only_full_spots_are_used(graph):
     rigged.observe(x, start, SUN, quality=SpotObservation.CUT_BY_BORDER)
     rigged.recorded(rigged.observe(x, start + 0.1, SUN)[1])
     assert [b.seconds for b in node._observations] == [pytest.approx(start + 0.1)]
-
-
-def test_a_request_with_stamps_uses_only_those_observations(graph):
-    node, in_process = graph
-    rigged = Rigged(node, in_process)
-    start = in_process.helper.get_clock().now().nanoseconds * 1e-9
-    joints = sweep_joints(rigged.rig)
-    # the client's frames, taken with the arm still: the true sun's spots; between them,
-    # frames the client did not choose (e.g. while the arm moved), 2 cm off
-    chosen = []
-    for k, x in enumerate(joints):
-        stamp, count = rigged.observe(x, start + 0.5 * k, SUN)
-        rigged.recorded(count)
-        chosen.append(stamp)
-        rigged.recorded(rigged.observe(x, start + 0.5 * k + 0.2, SUN,
-                                       shift=(0.02, 0.0, 0.0))[1])
-    response = in_process.call(rigged.client, EstimateSun.Request(stamps=chosen),
-                               timeout=30.0)
-    assert response.success, response.message
-    assert response.estimate.outliers == 0
-    assert sorted((s.sec, s.nanosec) for s in response.estimate.observation_stamps) == \
-        sorted((s.sec, s.nanosec) for s in chosen)
-    assert angle_deg(vector(response.estimate.direction), SUN) < 0.01
-    # the same count by recency takes the off frames in: no sun fits them all
-    response = in_process.call(rigged.client, EstimateSun.Request(
-        max_observations=len(chosen)), timeout=30.0)
-    assert not response.success or angle_deg(vector(response.estimate.direction), SUN) > 0.01
-    # stamps that were never observed: refused with the reason
-    response = in_process.call(rigged.client, EstimateSun.Request(
-        stamps=[stamp_from_seconds(start - 100.0)]), timeout=30.0)
-    assert not response.success and 'none of the 1 requested' in response.message

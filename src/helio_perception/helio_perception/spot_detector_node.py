@@ -17,7 +17,6 @@ parameters (config/spot_detector.yaml), converts messages and calls it. A malfor
 logged with its reason and skipped.
 """
 
-import collections
 import math
 import time
 
@@ -158,7 +157,6 @@ class SpotDetectorNode(Node):
                                           0.0, 1.0),
             response=response)
         self.observer = SpotObserver(marker, spot)
-        self.joint_still = marker.joint_tolerance
         self.features_in_optics = declare(
             self, 'features_in_optics_frame', True,
             'Compute the Eq 10 features in the optics frame from /joint_states and the rig '
@@ -167,15 +165,6 @@ class SpotDetectorNode(Node):
             self, 'joint_state_tolerance', 0.3,
             'Largest time between an image and the joint states used for it [s].',
             0.0, 10.0)
-        self.joint_wait = declare(
-            self, 'joint_wait', 1.0,
-            'An image stamped after the newest joint state of some joint waits for the next '
-            'one until an image this much newer arrived; joints that held still (within '
-            'marker.joint_tolerance) between samples this close to the image are known at its '
-            'stamp; 0: neither [s].', 0.0, 10.0)
-        self.max_waiting = declare(self, 'max_waiting_frames', 8,
-                                   'At most this many images wait for joint states [-].', 1,
-                                   100)
         lens, _ = declare_lens(self)
         self.T_lens_optics = lens.T_lens_optics
         self.rig, _ = declare_rig(self)
@@ -193,7 +182,6 @@ class SpotDetectorNode(Node):
 
         self.stats = FrameStatistics()
         self.joints = JointStateBuffer()
-        self._waiting = collections.deque()     # (Image, stamp [s]) waiting for joints
         self.camera = None
         self._info_key = None
         self.spot_pub = self.create_publisher(SpotObservation, 'spot',
@@ -217,12 +205,10 @@ class SpotDetectorNode(Node):
         self.world_calibrated = True
 
     def on_joint_state(self, msg):
-        """Merge a (partial) joint state into the buffer; process the images it completes."""
+        """Merge a (partial) joint state into the buffer."""
         problem = self.joints.add_message(msg)
         if problem:
             self.get_logger().warn(problem, throttle_duration_sec=5.0)
-        if self._waiting:
-            self._process_waiting()
 
     def on_camera_info(self, msg):
         """Keep the intrinsics; a change of intrinsics drops the cached marker pose."""
@@ -243,7 +229,8 @@ class SpotDetectorNode(Node):
         self.observer.reset()
 
     def on_image(self, msg):
-        """Take one image: process it now, or once the joint states reach its stamp."""
+        """Process one image: observe the spot and publish the observation."""
+        started = time.perf_counter()
         self.freshness.seen(self.node_seconds(), time.monotonic())
         stamp = stamp_to_seconds(msg.header.stamp)
         dropped = self.stats.frame(stamp)
@@ -254,62 +241,13 @@ class SpotDetectorNode(Node):
             self.get_logger().warn('no /rgb/camera_info yet: image skipped',
                                    throttle_duration_sec=5.0)
             return
-        self._waiting.append((msg, stamp))
-        self._process_waiting()
-
-    def _process_waiting(self):
-        """
-        Process the waiting images in order, up to the first whose joints may still come.
-
-        The drivers poll on the wall clock: under a simulated clock running faster, or a
-        loaded machine, the newest joint state can be older than joint_state_tolerance when
-        an image is processed, though the next one is on its way (measured at 4x real time:
-        most frames of a sweep had no joints, so no kinematic camera pose). Such an image waits
-        for it (until an image joint_wait newer arrives, max_waiting_frames at most), in order
-        with those after it.
-        """
-        while self._waiting:
-            msg, stamp = self._waiting[0]
-            if len(self._waiting) <= self.max_waiting and self._joints_may_come(stamp):
-                return
-            self._waiting.popleft()
-            self._process(msg, stamp)
-
-    def _joints_may_come(self, stamp):
-        """Return whether the joints at `stamp` are missing now but a joint state may come."""
-        complete = self.joints.complete_until()
-        if complete is None or complete >= stamp or self.joint_wait <= 0.0:
-            return False
-        if self._joints_at(stamp):
-            return False
-        # measured on the images' stamps, not the node clock: a detector that lags behind a
-        # loaded machine would otherwise let every frame go without waiting
-        return self._waiting[-1][1] - stamp <= self.joint_wait
-
-    def _joints_at(self, stamp):
-        """
-        Return the JointLookup at an image stamp: interpolated, else held still across it.
-
-        Still means within marker.joint_tolerance between samples at most joint_wait from the
-        stamp: under load the samples came 0.4-1 s apart (simulated, 4x real time) while the
-        arm stood still for the lens planner's observations.
-        """
-        lookup = self.joints.at(stamp, self.joint_state_tolerance)
-        if lookup or self.joint_wait <= 0.0:
-            return lookup
-        held = self.joints.held(stamp, self.joint_wait, self.joint_still)
-        return held if held else lookup
-
-    def _process(self, msg, stamp):
-        """Observe the spot in one image and publish the observation."""
-        started = time.perf_counter()
         try:
             image = image_to_numpy(msg)
             order = CHANNEL_ORDER.get(msg.encoding)
             if order is None:
                 raise ImageConversionError(f'{msg.encoding} is not a colour or 8-bit mono '
                                            'encoding')
-            joints = self._joints_at(stamp).positions
+            joints = self.joints.at(stamp, self.joint_state_tolerance).positions
             T_optics_world = T_world_camera_kinematic = None
             if joints is not None:
                 pose = self.rig.forward(joints)

@@ -132,30 +132,6 @@ def test_spot_detector_publishes_observations_and_survives_bad_frames(graph):
     assert node.stats.as_dict()['frames_invalid'] == 1
 
 
-def test_an_image_newer_than_the_joint_states_waits_for_the_next_one(graph):
-    # the drivers poll on the wall clock: under a faster simulated clock the image at 10.5 s
-    # comes before any joint state at or after it, and the last one is 0.5 s old
-    scene = SyntheticScene(640, 480)
-    rng = np.random.default_rng(78)
-    T_world_camera, (spot,) = scene.random_view(rng, spot_options={'value': 0.8})
-    frame = scene.render(T_world_camera, [spot], rng=rng)
-    node = graph.add(SpotDetectorNode(**graph.node_options(**{'marker.side': scene.marker_side})))
-    received = graph.collect(SpotObservation, 'spot')
-    feed = Feeder(graph, 'rgb')
-    feed.infos.publish(camera_info_from_camera(scene.camera, stamp_from_seconds(10.0), 'rgb'))
-    feed.joint_states(10.0)
-    graph.wait_until(lambda: node.camera is not None and node.joints.at(10.0, 0.0),
-                     what='camera_info and both joint-state parts')
-    feed.image(frame.image, 'rgb8', 10.5)
-    graph.wait_until(lambda: len(node._waiting) == 1, what='the image waiting for joints')
-    assert not received.messages
-    feed.joint_states(10.6)                  # the arm held still: known at 10.5 s
-    first = received.wait_for_count(1)[0]
-    assert first.valid, first.reason
-    assert first.feature_frame == 'optics'   # the joints at its stamp were known
-    assert not node._waiting
-
-
 def test_thermal_monitor_publishes_stats_with_the_hottest_ground_point(graph):
     node = graph.add(ThermalMonitorNode(**graph.node_options()))
     received = graph.collect(ThermalStats, 'thermal/stats')

@@ -111,17 +111,6 @@ class JointStateBuffer:
         newest = [s[-1] for s in self._stamps.values() if s]
         return max(newest) if newest else None
 
-    def complete_until(self):
-        """
-        Return the stamp up to which every joint has samples [s] (None: a joint has none).
-
-        A lookup at a later stamp has no sample after it yet for some joint: it gets the
-        nearest older one, or fails beyond the tolerance, until the next joint state arrives.
-        """
-        if not all(self._stamps[name] for name in self.names):
-            return None
-        return min(self._stamps[name][-1] for name in self.names)
-
     def at(self, stamp, tolerance, rest_hold=0.0, rest_epsilon=1e-6):
         """
         Return the joints at `stamp` [s] (JointLookup).
@@ -173,55 +162,17 @@ class JointStateBuffer:
         return JointLookup(positions=np.array(positions), gap=worst)
 
     @staticmethod
-    def _still_between(stamps, values, before, after, stamp, span, tolerance):
-        """Return the joint's value if its samples around `stamp` agree within `span`."""
-        gap = max(stamp - stamps[before], stamps[after] - stamp)
-        if gap > span or abs(values[after] - values[before]) > tolerance:
-            return None
-        return values[before]
-
-    @classmethod
-    def _at_rest(cls, stamps, values, before, after, stamp, rest_hold, rest_epsilon):
+    def _at_rest(stamps, values, before, after, stamp, rest_hold, rest_epsilon):
         """Return the joint's value if it rests around `stamp` (see ``at``), else None."""
         if not rest_hold > 0.0 or before is None:
             return None
         if after is not None:
-            return cls._still_between(stamps, values, before, after, stamp, rest_hold,
-                                      rest_epsilon)
-        # newer than every sample: the newest two agree
-        still = before > 0 and abs(values[before] - values[before - 1]) <= rest_epsilon
-        return values[before] if still and stamp - stamps[before] <= rest_hold else None
-
-    def held(self, stamp, span, tolerance):
-        """
-        Return the joints at `stamp` [s] when every joint held still across it (JointLookup).
-
-        Each joint needs a sample before and one after `stamp`, both within `span` [s], that
-        differ by at most `tolerance`: the joint did not move between them, so its value at
-        `stamp` is known however sparse the samples (a loaded machine, a simulated clock
-        running faster than the drivers' wall-clock polling). Otherwise the lookup fails,
-        naming the joint. (``at`` with `rest_hold` also takes an image newer than every
-        sample when the newest two agree.)
-        """
-        stamp = float(stamp)
-        positions, worst = [], 0.0
-        for name in self.names:
-            stamps, values = self._stamps[name], self._values[name]
-            index = bisect.bisect_left(stamps, stamp)
-            if index < len(stamps) and stamps[index] == stamp:
-                positions.append(values[index])
-                continue
-            if index == 0 or index == len(stamps):
-                return JointLookup(reason=f'no {name} sample on both sides of the asked time')
-            value = self._still_between(stamps, values, index - 1, index, stamp, span,
-                                        tolerance)
-            gap = max(stamp - stamps[index - 1], stamps[index] - stamp)
-            if value is None:
-                return JointLookup(reason=f'{name} moved or its samples are {gap:.3f} s from '
-                                          'the asked time', gap=gap)
-            positions.append(value)
-            worst = max(worst, gap)
-        return JointLookup(positions=np.array(positions), gap=worst)
+            still = abs(values[after] - values[before]) <= rest_epsilon
+            near = max(stamp - stamps[before], stamps[after] - stamp) <= rest_hold
+        else:                        # newer than every sample: the newest two agree
+            still = before > 0 and abs(values[before] - values[before - 1]) <= rest_epsilon
+            near = stamp - stamps[before] <= rest_hold
+        return values[before] if still and near else None
 
     def latest(self, now, max_age=0.0):
         """
