@@ -21,7 +21,7 @@ from conftest import graph_of_processes
 from helio_msgs.action import CalibrateWorld, SweepSun
 from helio_optics.node_kit.conversions import point_to_array, stamp_to_seconds
 import pytest
-from test_lens_planner import angle_deg, NODES, Planner
+from test_lens_planner import angle_deg, NODES, Planner, site_elsewhere_file
 
 # (name, world latitude [deg], longitude [deg], start time, robot heading [deg]): the
 # elevation and the azimuth from the robot's x axis the world's ephemeris gives then
@@ -39,8 +39,9 @@ def planner_under(request, tmp_path_factory):
     tmp_path = tmp_path_factory.mktemp(request.param[0])
     world = {'real_time_factor': 4.0, 'flux_rays': 20000, 'latitude_deg': latitude,
              'longitude_deg': longitude, 'start_time': start, 'robot_heading_deg': heading}
-    overrides = {'sim_world': world,
-                 'lens_planner': {'calibration_dir': str(tmp_path / 'calibration')}}
+    site = {'site_file': site_elsewhere_file(tmp_path)}      # the controller: Lausanne
+    overrides = {'sim_world': world, 'sun_estimator': site,
+                 'lens_planner': {**site, 'calibration_dir': str(tmp_path / 'calibration')}}
     with graph_of_processes(tmp_path, NODES, overrides) as (_, graph):
         yield Planner(graph)
 
