@@ -31,7 +31,9 @@ import yaml
 
 LOSS_BOUND = int(4.0 * (0.5 + 2.0) * 1e9)     # ns of simulated time
 NODES = ('sim_world', 'dobot_driver', 'servo_driver', 'thermal_monitor')
-WORLD = {'sim_world': {'real_time_factor': 4.0, 'flux_rays': 5000}}
+# 2x: the recording is under test, not the pace; at 4x the compiled world sends 35 thermal
+# frames a second of wall time and the thermal monitor, beside the rest, answered 41 of 140
+WORLD = {'sim_world': {'real_time_factor': 2.0, 'flux_rays': 5000}}
 EXPECTED = {   # topic: (type, the least count that is plausible for the run)
     '/clock': ('rosgraph_msgs/msg/Clock', 20),
     '/joint_states': ('sensor_msgs/msg/JointState', 20),
