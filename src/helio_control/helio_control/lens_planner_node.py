@@ -37,6 +37,7 @@ import os
 import time
 import traceback
 
+from action_msgs.msg import GoalStatus
 from geometry_msgs.msg import PoseStamped
 from helio_control import lens_moves, sun_sweep
 from helio_control.focus_lease import FocusLease
@@ -397,16 +398,24 @@ class LensPlannerNode(Node):
                 raise GoalFailed(f'{name} refused the goal (another move running?)')
             handles.append(handle)
             self._driver_goals.append(handle)
+        # both results are asked for at once: a result asked for only after the other move
+        # ended can find the goal expired (a driver that accepted it before its first /clock
+        # stamped it 0, so once done it is 'older' than any result timeout) and comes back
+        # as an empty failure with status UNKNOWN
+        replies = [handle.get_result_async() for handle in handles]
         try:
-            arm_result = (await handles[0].get_result_async()).result
-            wrist_result = (await handles[1].get_result_async()).result
+            arm_reply, wrist_reply = await replies[0], await replies[1]
         finally:
             for handle in handles:
                 self._driver_goals.remove(handle)
         self._check_cancel(goal_handle)
-        for result, name in ((arm_result, 'move_arm'), (wrist_result, 'move_wrist')):
-            if not result.success:
-                raise GoalFailed(f'{name} failed: {result.message}')
+        for reply, name in ((arm_reply, 'move_arm'), (wrist_reply, 'move_wrist')):
+            if reply.status == GoalStatus.STATUS_UNKNOWN:
+                raise GoalFailed(f'{name} no longer knew the goal when its result was asked '
+                                 'for (expired on the driver)')
+            if not reply.result.success:
+                raise GoalFailed(f'{name} failed: {reply.result.message}')
+        arm_result, wrist_result = arm_reply.result, wrist_reply.result
         return np.array([*arm_result.achieved_joints[:3], wrist_result.achieved_yaw,
                          wrist_result.achieved_pitch])
 
