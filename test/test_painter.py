@@ -106,10 +106,14 @@ def test_the_window_rule_paints_faster_than_the_papers_with_dots_as_even(paintin
         result, dots = painting.paint(rule, points=targets, cooling=rule)
         assert result.success, result.message
         assert result.dots_burnt == ROW
-        # the plan's cycle model knows the rule: the window rule's estimate has no wait
-        estimate_error = result.time_estimated / result.duration - 1.0
+        # the plan's cycle model knows the rule: the window rule's estimate has no wait. It
+        # counts the dots' cycles, from the first dot's move to the last dot's end: the
+        # painting's duration also holds a calibration and sweep when the goal needs them
+        painted = dots[-1].end - dots[0].start
+        estimate_error = result.time_estimated / painted - 1.0
         print(f'{rule} rule: the plan estimated {result.time_estimated:.0f} s, '
-              f'{estimate_error * 100:+.0f} % of the {result.duration:.0f} s taken')
+              f'{estimate_error * 100:+.0f} % of the {painted:.0f} s the dots took '
+              f'({result.duration:.0f} s in all)')
         assert abs(estimate_error) <= 0.2
         assert [d.outcome for d in dots] == ['burnt'] * ROW
         # a dot's cycle: from the start of its move to the start of the next one's. The

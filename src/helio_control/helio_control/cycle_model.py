@@ -7,7 +7,9 @@ One dot, as the painter runs it (Algorithm 1, lines 6-14):
    pose (d_lp), one commanded move;
 2. heat until N_p >= N_p target: ``heating_onset_s`` until the first thermal pixel reaches
    the camera cap (T_p taken as 180.9 degC), then ``heating_per_pixel_s`` per pixel of N_p
-   (paper Fig. 8 a/c: about 20 s to N_p = 30 at d_lp 8.2 cm; simulated world 17.9 s);
+   (paper Fig. 8 a/c: about 20 s to N_p = 30 at d_lp 8.2 cm; the defaults, 15.9 s, are
+   fitted to 134 dots the painter burnt in the simulated world, timed from the focus
+   reached: the approach has warmed the wood by then);
 3. retreat by delta d_lp (one move) and wait until N_p has dropped to 0 (Sec. IV-B3: T_max
    stays at the cap about 3 s): the wait ``cooling_s`` starts when the retreat starts, so
    the retreat move is hidden in it when shorter;
@@ -40,8 +42,8 @@ import numpy as np
 class CycleModel:
     """Parameters of the per-dot cycle [s]; see the module docstring."""
 
-    heating_onset_s: float = 12.0
-    heating_per_pixel_s: float = 0.2
+    heating_onset_s: float = 10.6
+    heating_per_pixel_s: float = 0.176
     cooling_s: float = 3.1
     thermal_frame_s: float = 0.115
     move_overhead_s: float = 0.1

@@ -28,7 +28,7 @@ def test_estimate_of_three_dots_by_hand():
 def test_config_file_matches_the_documented_defaults():
     model, limits = load_cycle_config(CONFIG)
     assert model == CycleModel()
-    assert model.heating_time(30) == pytest.approx(18.0)
+    assert model.heating_time(30) == pytest.approx(15.88)
     assert np.degrees(limits.arm_velocity) == pytest.approx([100.0] * 3)
     assert np.degrees(limits.wrist_acceleration) == pytest.approx(450.0)
 
