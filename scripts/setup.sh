@@ -10,7 +10,8 @@
 #   3. the project's Python dependencies in .venv (pinned by requirements/constraints.txt);
 #   4. the wheels' CMake files rewritten to this machine's Python and numpy paths;
 #   5. colcon build of src/ (only when a file under src/ changed since the last build);
-#   6. install/setup.bash sourced.
+#   6. install/setup.bash sourced;
+#   7. after a build, the simulated world's numba kernels compiled (helio_drivers.sim.warm_up).
 # Environment knobs: HELIO_PYTHON (interpreter for .venv, default python3),
 # HELIO_FORCE_BUILD=1 (rebuild even if nothing changed), HELIO_VENV (the virtual
 # environment to use, default .venv in this checkout; several checkouts may share one).
@@ -156,6 +157,7 @@ _helio_build() {
         >&2) 9>"$_helio_root/.helio.lock" \
         || { _helio_die "colcon build failed (see the output above)"; return 1; }
     ls "$_helio_root/src" > "$stamp"
+    _helio_built=1
 }
 
 helio_setup() {
@@ -176,6 +178,14 @@ helio_setup() {
     _helio_build || return 1
     # shellcheck disable=SC1091
     set +u; source "$_helio_root/install/setup.bash"; set -u
+    if [ -n "${_helio_built:-}" ]; then
+        # A build leaves the simulated world's numba cache empty: compiled here, not in the
+        # first sim_world, whose emulated devices would go unanswered while it compiles.
+        _helio_log "compiling the simulated world's kernels"
+        python3 -m helio_drivers.sim.warm_up >&2 \
+            || { _helio_die "the simulated world's kernels did not compile"; return 1; }
+        unset _helio_built
+    fi
     # Discovery stays on this machine unless the caller says otherwise.
     export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
 }
