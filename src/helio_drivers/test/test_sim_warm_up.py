@@ -8,7 +8,7 @@ from helio_drivers.sim import kernels
 import numba
 
 # in a fresh interpreter: this test process may have run the kernels in other tests already
-PROBE = '''
+PROBE = """
 import json
 from helio_drivers.sim import kernels
 from helio_drivers.sim.warm_up import warm_up
@@ -16,7 +16,7 @@ before = [n for n, v in vars(kernels).items() if getattr(v, "signatures", None)]
 ran = warm_up(steps=2)
 after = [n for n, v in vars(kernels).items() if getattr(v, "signatures", None)]
 print(json.dumps({"before": before, "ran": ran, "after": after}))
-'''
+"""
 
 
 def test_the_warm_up_runs_every_public_kernel_in_a_fresh_process():
