@@ -24,6 +24,7 @@ class FrameStatistics:
         self.malformed = 0
         self.invalid = 0
         self.dropped = 0
+        self.late = 0
         self.reasons = Counter()
         self.processing_ms = deque(maxlen=200)
         self._periods = deque(maxlen=period_window)
@@ -56,6 +57,10 @@ class FrameStatistics:
         if milliseconds is not None:
             self.processing_ms.append(milliseconds)
 
+    def late_frame(self):
+        """Register a frame skipped because it was too far behind the node clock."""
+        self.late += 1
+
     def bad_frame(self, reason):
         """Register a frame that could not be used at all (logged with `reason`)."""
         self.malformed += 1
@@ -68,6 +73,7 @@ class FrameStatistics:
             'frames_received': self.received, 'frames_published': self.published,
             'frames_malformed': self.malformed, 'frames_invalid': self.invalid,
             'frames_dropped_estimated': self.dropped,
+            'frames_skipped_late': self.late,
             'processing_ms_median': times[len(times) // 2] if times else 0.0,
             'processing_ms_max': times[-1] if times else 0.0,
         }

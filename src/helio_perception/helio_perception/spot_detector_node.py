@@ -165,6 +165,15 @@ class SpotDetectorNode(Node):
             self, 'joint_state_tolerance', 0.3,
             'Largest time between an image and the joint states used for it [s].',
             0.0, 10.0)
+        self.max_image_lag = declare(
+            self, 'max_image_lag', 0.5,
+            'Under use_sim_time, an image stamped more than this before the node clock is '
+            'skipped: a detector that falls behind its camera (a simulated clock running '
+            'several times faster than real time) otherwise works through old images while '
+            'the joint states queue behind them, and has none for the image it is on. On the '
+            'system clock images are never skipped (a replay without its /clock has old '
+            'stamps); 0: never [s].', 0.0, 60.0)
+        self.sim_time = bool(self.get_parameter('use_sim_time').value)
         lens, _ = declare_lens(self)
         self.T_lens_optics = lens.T_lens_optics
         self.rig, _ = declare_rig(self)
@@ -236,6 +245,14 @@ class SpotDetectorNode(Node):
         dropped = self.stats.frame(stamp)
         if dropped:
             self.get_logger().debug(f'{dropped} frame(s) dropped before this one')
+        lag = self.node_seconds() - stamp
+        if self.sim_time and self.max_image_lag > 0.0 and lag > self.max_image_lag:
+            self.stats.late_frame()
+            self.get_logger().warn(
+                f'image {lag:.2f} s behind the clock skipped (max_image_lag '
+                f'{self.max_image_lag:g} s): the detector does not keep up with the camera; '
+                f'{self.stats.late} skipped so far', throttle_duration_sec=5.0)
+            return
         if self.camera is None:
             self.stats.bad_frame('no camera_info yet')
             self.get_logger().warn('no /rgb/camera_info yet: image skipped',
@@ -247,7 +264,12 @@ class SpotDetectorNode(Node):
             if order is None:
                 raise ImageConversionError(f'{msg.encoding} is not a colour or 8-bit mono '
                                            'encoding')
-            joints = self.joints.at(stamp, self.joint_state_tolerance).positions
+            lookup = self.joints.at(stamp, self.joint_state_tolerance)
+            joints = lookup.positions
+            if joints is None and (self.features_in_optics or self.world_calibrated):
+                self.get_logger().warn(
+                    f'no joint states at the image of {stamp:.3f} s ({lookup.reason}): no '
+                    'optics-frame features, no kinematic camera pose', throttle_duration_sec=5.0)
             T_optics_world = T_world_camera_kinematic = None
             if joints is not None:
                 pose = self.rig.forward(joints)

@@ -13,7 +13,7 @@ from helio_msgs.msg import SpotObservation, ThermalStats
 from helio_optics.geometry import invert_transform, transform_points
 from helio_optics.lens import LensParameters
 from helio_optics.node_kit.conversions import camera_info_from_camera, numpy_to_image
-from helio_optics.node_kit.conversions import stamp_from_seconds
+from helio_optics.node_kit.conversions import stamp_from_seconds, stamp_to_seconds
 from helio_optics.node_kit.in_process_graph import InProcessGraph
 from helio_optics.rig_kinematics import Rig
 from helio_perception import spot_detection
@@ -250,3 +250,30 @@ def test_spot_detector_reports_stale_input_and_missing_camera_info(graph):
                       what='an ERROR status')
     error = [s for s in statuses() if s.level == DiagnosticStatus.ERROR][0]
     assert 'no rgb/image_raw since the start' in error.message
+
+
+def test_spot_detector_skips_images_far_behind_its_clock(graph):
+    """A detector behind its camera skips old images (joint states then catch up)."""
+    scene = SyntheticScene(640, 480)
+    rng = np.random.default_rng(78)
+    T_world_camera, (spot,) = scene.random_view(rng, spot_options={'value': 0.8})
+    frame = scene.render(T_world_camera, [spot], rng=rng)
+    node = graph.add(SpotDetectorNode(**graph.node_options(
+        use_sim_time=True, max_image_lag=0.5, **{'marker.side': scene.marker_side})))
+    received = graph.collect(SpotObservation, 'spot')
+    clock = graph.helper.create_publisher(Clock, '/clock', 10)
+    feed = Feeder(graph, 'rgb')
+    feed.infos.publish(camera_info_from_camera(scene.camera, stamp_from_seconds(20.0), 'rgb'))
+    for seconds in (18.0, 20.0):
+        feed.joint_states(seconds)
+    clock.publish(Clock(clock=stamp_from_seconds(20.0)))
+    graph.wait_until(lambda: node.camera is not None and node.node_seconds() >= 20.0
+                     and node.joints.at(20.0, 0.0), what='camera_info, /clock and the joints')
+    feed.image(frame.image, 'rgb8', 19.0)         # 1 s behind the clock: skipped
+    feed.image(frame.image, 'rgb8', 19.8)         # 0.2 s: processed
+    observation = received.wait_for_count(1)[0]
+    assert stamp_to_seconds(observation.header.stamp) == pytest.approx(19.8)
+    assert observation.valid, observation.reason
+    graph.wait_until(lambda: node.stats.received == 2, what='both images received')
+    assert node.stats.late == 1 and node.stats.as_dict()['frames_skipped_late'] == 1
+    assert len(received.messages) == 1
