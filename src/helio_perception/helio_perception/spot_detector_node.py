@@ -31,7 +31,7 @@ from helio_optics.node_kit.deployment import declare_lens, declare_rig
 from helio_optics.node_kit.deployment import follow_world_calibration
 from helio_optics.node_kit.diagnostics import diagnostic_array, OK
 from helio_optics.node_kit.joint_states import JointStateBuffer
-from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.parameters import declare, declare_joint_lookup
 from helio_optics.node_kit.process_tuning import frozen_after_start_up, keep_large_buffers
 from helio_optics.node_kit.runner import run_node
 from helio_perception.frame_statistics import FrameStatistics, InputFreshness
@@ -161,10 +161,7 @@ class SpotDetectorNode(Node):
             self, 'features_in_optics_frame', True,
             'Compute the Eq 10 features in the optics frame from /joint_states and the rig '
             'kinematics (else, or without joint states, in the world frame).')
-        self.joint_state_tolerance = declare(
-            self, 'joint_state_tolerance', 0.3,
-            'Largest time between an image and the joint states used for it [s].',
-            0.0, 10.0)
+        self.joint_state_tolerance, self.joint_rest_hold = declare_joint_lookup(self)
         self.max_image_lag = declare(
             self, 'max_image_lag', 0.5,
             'Under use_sim_time, an image stamped more than this before the node clock is '
@@ -264,7 +261,7 @@ class SpotDetectorNode(Node):
             if order is None:
                 raise ImageConversionError(f'{msg.encoding} is not a colour or 8-bit mono '
                                            'encoding')
-            lookup = self.joints.at(stamp, self.joint_state_tolerance)
+            lookup = self.joints.at(stamp, self.joint_state_tolerance, self.joint_rest_hold)
             joints = lookup.positions
             if joints is None and (self.features_in_optics or self.world_calibrated):
                 self.get_logger().warn(

@@ -33,7 +33,7 @@ from helio_optics.node_kit.conversions import ImageConversionError, stamp_to_sec
 from helio_optics.node_kit.deployment import declare_rig, follow_world_calibration
 from helio_optics.node_kit.diagnostics import diagnostic_array, ERROR
 from helio_optics.node_kit.joint_states import JointStateBuffer
-from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.parameters import declare, declare_joint_lookup
 from helio_optics.node_kit.process_tuning import frozen_after_start_up
 from helio_optics.node_kit.runner import run_node
 from helio_perception.frame_statistics import FrameStatistics, InputFreshness
@@ -73,16 +73,7 @@ class ThermalMonitorNode(Node):
             self, 'locate_hottest_point', True,
             'Map the hottest pixel to the ground (needs /thermal/camera_info, /joint_states '
             'and the rig kinematics).')
-        self.joint_state_tolerance = declare(
-            self, 'joint_state_tolerance', 0.3,
-            'Largest time between an image and the joint states used for it [s].',
-            0.0, 10.0)
-        self.joint_rest_hold = declare(
-            self, 'joint_rest_hold', 1.0,
-            'A joint at rest (equal samples around the image, or the newest two equal for an '
-            'image newer than them) is known this far from the image; bridges the gaps a '
-            "fast simulated clock leaves between the drivers' wall-clock joint states while "
-            'the lens is held on a dot (0: off) [s].', 0.0, 10.0)
+        self.joint_state_tolerance, self.joint_rest_hold = declare_joint_lookup(self)
         self.rig, _ = declare_rig(self)
         follow_world_calibration(self, self.rig)     # T_robot_world from the marker
         self.frame_id = declare(self, 'frame_id', 'thermal',

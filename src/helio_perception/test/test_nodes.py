@@ -277,3 +277,11 @@ def test_spot_detector_skips_images_far_behind_its_clock(graph):
     graph.wait_until(lambda: node.stats.received == 2, what='both images received')
     assert node.stats.late == 1 and node.stats.as_dict()['frames_skipped_late'] == 1
     assert len(received.messages) == 1
+    assert observation.feature_frame == 'optics'
+    # an image newer than every joint state by more than joint_state_tolerance: the joints'
+    # newest two samples agree, so they are at rest and known (joint_rest_hold 1 s)
+    clock.publish(Clock(clock=stamp_from_seconds(20.8)))
+    graph.wait_until(lambda: node.node_seconds() >= 20.8, what='/clock at 20.8 s')
+    feed.image(frame.image, 'rgb8', 20.7)
+    rested = received.wait_for_count(2)[1]
+    assert rested.valid and rested.feature_frame == 'optics', rested.reason

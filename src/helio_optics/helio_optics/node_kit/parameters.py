@@ -106,3 +106,23 @@ def declare(node, name, default, description, minimum=None, maximum=None, choice
     if choices and value not in choices:
         raise ValueError(f'parameter {name} must be one of {choices}, got {value!r}')
     return value
+
+
+def declare_joint_lookup(node, rest_hold=1.0):
+    """
+    Declare how a camera node finds the joints at an image's stamp; return (tolerance, hold).
+
+    ``joint_state_tolerance``: the largest time between an image and the joint states used
+    for it; ``joint_rest_hold``: how far from the image a joint at rest is still known
+    (``JointStateBuffer.at``'s `rest_hold`). Both [s].
+    """
+    tolerance = declare(node, 'joint_state_tolerance', 0.3,
+                        'Largest time between an image and the joint states used for it [s].',
+                        0.0, 10.0)
+    hold = declare(
+        node, 'joint_rest_hold', rest_hold,
+        'A joint at rest (equal samples around the image, or the newest two equal for an '
+        'image newer than them) is known this far from the image; bridges the gaps a fast '
+        "simulated clock leaves between the drivers' wall-clock joint states while the lens "
+        'is held still (0: off) [s].', 0.0, 10.0)
+    return tolerance, hold
