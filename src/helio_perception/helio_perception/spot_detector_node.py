@@ -30,7 +30,7 @@ from helio_optics.node_kit.conversions import ImageConversionError, stamp_to_sec
 from helio_optics.node_kit.deployment import declare_lens, declare_rig
 from helio_optics.node_kit.deployment import follow_world_calibration
 from helio_optics.node_kit.diagnostics import diagnostic_array, OK
-from helio_optics.node_kit.joint_states import JointStateBuffer
+from helio_optics.node_kit.joint_states import CAMERA_NODE_JOINT_STATE_DEPTH, JointStateBuffer
 from helio_optics.node_kit.parameters import declare, declare_joint_lookup
 from helio_optics.node_kit.process_tuning import frozen_after_start_up, keep_large_buffers
 from helio_optics.node_kit.runner import run_node
@@ -197,7 +197,8 @@ class SpotDetectorNode(Node):
         self.create_subscription(Image, 'rgb/image_raw', self.on_image, qos_profile_sensor_data)
         self.create_subscription(CameraInfo, 'rgb/camera_info', self.on_camera_info,
                                  qos_profile_sensor_data)
-        self.create_subscription(JointState, 'joint_states', self.on_joint_state, 50)
+        self.create_subscription(JointState, 'joint_states', self.on_joint_state,
+                                 CAMERA_NODE_JOINT_STATE_DEPTH)
         if self.diagnostics_period > 0:
             # wall time: the node clock stops with /clock, and that must be reported too
             self.create_timer(self.diagnostics_period, self.publish_diagnostics,

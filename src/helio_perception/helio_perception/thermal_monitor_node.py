@@ -32,7 +32,7 @@ from helio_optics.node_kit.conversions import camera_from_info, image_to_numpy
 from helio_optics.node_kit.conversions import ImageConversionError, stamp_to_seconds
 from helio_optics.node_kit.deployment import declare_rig, follow_world_calibration
 from helio_optics.node_kit.diagnostics import diagnostic_array, ERROR
-from helio_optics.node_kit.joint_states import JointStateBuffer
+from helio_optics.node_kit.joint_states import CAMERA_NODE_JOINT_STATE_DEPTH, JointStateBuffer
 from helio_optics.node_kit.parameters import declare, declare_joint_lookup
 from helio_optics.node_kit.process_tuning import frozen_after_start_up
 from helio_optics.node_kit.runner import run_node
@@ -94,7 +94,8 @@ class ThermalMonitorNode(Node):
                                  qos_profile_sensor_data)
         self.create_subscription(CameraInfo, 'thermal/camera_info', self.on_camera_info,
                                  qos_profile_sensor_data)
-        self.create_subscription(JointState, 'joint_states', self.on_joint_state, 50)
+        self.create_subscription(JointState, 'joint_states', self.on_joint_state,
+                                 CAMERA_NODE_JOINT_STATE_DEPTH)
         self.window = None           # (x, y, radius) [m] in the world frame, or None
         self._window_mask = (None, None)   # (key, mask) of the last pose and window
         self.create_subscription(

@@ -19,6 +19,14 @@ import math
 from helio_optics.rig_kinematics import JOINT_NAMES
 import numpy as np
 
+# Queue depth of a camera node's joint_states subscription. rclpy takes one message per
+# subscription per turn of the executor: a node whose image callbacks take longer than the
+# drivers' messages come (40 a second: two partial messages at 20 Hz) works through a
+# backlog, and with a deep queue its newest joints fall behind its images (depth 50 put the
+# spot detector's 6-7 s of simulated time behind at 6x real time). A short queue drops the
+# oldest instead, so the joints taken are at most this many messages old.
+CAMERA_NODE_JOINT_STATE_DEPTH = 5
+
 
 @dataclass
 class JointLookup:
