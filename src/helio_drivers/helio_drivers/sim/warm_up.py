@@ -3,6 +3,10 @@ Compile the simulated world's numba kernels into their cache before anything run
 
     python -m helio_drivers.sim.warm_up        (scripts/setup.sh runs it after each build)
 
+``sim_world`` also calls ``warm_up`` before it opens its emulated devices' ports: numba
+loads a kernel's cached machine code only at its first call, and those loads, spread over
+the first step and the first move, stalled the emulators too (below).
+
 numba compiles a kernel at its first call and keeps the machine code beside ``kernels.py``
 (``cache=True``); a fresh build copies ``kernels.py`` into ``install/`` and starts with an
 empty cache. Compiling holds the interpreter lock for 5-8 s of a 2-core machine, and the
@@ -45,14 +49,16 @@ def compiled_kernels():
     return [name for name in all_kernels() if getattr(kernels, name).signatures]
 
 
-def warm_up(rig=None, steps=10):
+def warm_up(rig=None, steps=10, settings=None):
     """
     Run a throwaway world through heating, a move and every render; return the kernels run.
 
-    `steps` world steps are taken at the heating pose and again during the move.
+    `steps` world steps are taken at the heating pose and again during the move; `settings`
+    (SimSettings, default the defaults) those of the world that will run, so that the
+    kernels its settings call are the ones made ready.
     """
     rig = rig or load_rig_parameters(default_rig_file())
-    world = SimWorld(SimSettings(), rig)
+    world = SimWorld(settings or SimSettings(), rig)
     here = true_sun_focus_joints(world, DOT, D_LP)
     there = true_sun_focus_joints(world, (DOT[0] + 0.004, DOT[1]), D_LP)
     for joints in (here, there):

@@ -56,6 +56,7 @@ import time
 from geometry_msgs.msg import PointStamped, PoseStamped, Vector3, Vector3Stamped
 from helio_drivers.sim.clock import Lockstep, Pacer
 from helio_drivers.sim.devices import DeviceSettings, SimDevices
+from helio_drivers.sim.warm_up import warm_up
 from helio_drivers.sim.world import flat_settings, settings_from_flat, SimSettings, SimWorld
 from helio_msgs.msg import LightTruth, ThermalStats
 from helio_optics.node_kit.conversions import array_to_point, camera_info_from_camera
@@ -211,7 +212,16 @@ class SimWorldNode(Node):
             initial_joints_deg=tuple(declare(
                 self, 'initial_joints_deg', list(DeviceSettings.initial_joints_deg),
                 'Dobot j1..j4 at start [deg]')))
-        self.world = SimWorld(self.settings, load_rig_parameters(rig_file))
+        rig = load_rig_parameters(rig_file)
+        self.world = SimWorld(self.settings, rig)
+        # every kernel's machine code loaded (or compiled) now, before the emulated devices
+        # answer: numba loads it at a kernel's first call, and those loads, at the first
+        # step or the first move, held the interpreter lock longer than the drivers' 0.1 s
+        # serial timeouts (the servo driver reported its link lost at the graph's first move)
+        started = time.perf_counter()
+        ready = warm_up(rig, steps=2, settings=self.settings)
+        self.get_logger().info(f'{len(ready)} compiled kernels ready in '
+                               f'{time.perf_counter() - started:.2f} s')
         self.devices = SimDevices(self.world.clock, devices)
         self.world.attach_joint_source(self.devices.joint_positions)
         dobot_port, servo_port = self.devices.ports
