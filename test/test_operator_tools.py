@@ -169,6 +169,14 @@ def start_sim(tmp_path, *nodes):
         if len(pids) == len(nodes):
             break
     assert len(pids) == len(nodes), process.stderr.read()
+    # a pid is printed at the spawn; a signal sent before the node's rclpy took over its
+    # handlers was swallowed by the interpreter's start-up (seen for sim_world: its SIGINT
+    # lost in importlib, so it ended by SIGTERM). Each node logs its thread pools once up.
+
+    def up(node):
+        path = tmp_path / 'logs' / f'{node}.log'
+        return path.exists() and 'numeric thread pools' in path.read_text(errors='replace')
+    wait_for(lambda: all(up(node) for node in nodes), 120.0, f'{", ".join(nodes)} up')
     return process, pids
 
 
