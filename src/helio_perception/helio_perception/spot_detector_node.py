@@ -262,7 +262,10 @@ class SpotDetectorNode(Node):
             if order is None:
                 raise ImageConversionError(f'{msg.encoding} is not a colour or 8-bit mono '
                                            'encoding')
-            lookup = self.joints.at(stamp, self.joint_state_tolerance, self.joint_rest_hold)
+            # at rest only between two equal samples: an image newer than every sample may
+            # show the arm already moving off to the next pose
+            lookup = self.joints.at(stamp, self.joint_state_tolerance, self.joint_rest_hold,
+                                    rest_after_newest=False)
             joints = lookup.positions
             if joints is None and (self.features_in_optics or self.world_calibrated):
                 self.get_logger().warn(

@@ -278,10 +278,18 @@ def test_spot_detector_skips_images_far_behind_its_clock(graph):
     assert node.stats.late == 1 and node.stats.as_dict()['frames_skipped_late'] == 1
     assert len(received.messages) == 1
     assert observation.feature_frame == 'optics'
-    # an image newer than every joint state by more than joint_state_tolerance: the joints'
-    # newest two samples agree, so they are at rest and known (joint_rest_hold 1 s)
-    clock.publish(Clock(clock=stamp_from_seconds(20.8)))
-    graph.wait_until(lambda: node.node_seconds() >= 20.8, what='/clock at 20.8 s')
-    feed.image(frame.image, 'rgb8', 20.7)
+    # an image 0.5 s from both samples around it (beyond joint_state_tolerance): the two
+    # agree, so the joints were at rest and are known (joint_rest_hold 1 s)
+    feed.joint_states(21.0)
+    clock.publish(Clock(clock=stamp_from_seconds(20.9)))
+    graph.wait_until(lambda: node.node_seconds() >= 20.9 and node.joints.at(21.0, 0.0),
+                     what='/clock at 20.9 s and the joints at 21.0 s')
+    feed.image(frame.image, 'rgb8', 20.5)
     rested = received.wait_for_count(2)[1]
     assert rested.valid and rested.feature_frame == 'optics', rested.reason
+    # an image 0.5 s newer than every sample: the arm may be moving off, the joints unknown
+    clock.publish(Clock(clock=stamp_from_seconds(21.6)))
+    graph.wait_until(lambda: node.node_seconds() >= 21.6, what='/clock at 21.6 s')
+    feed.image(frame.image, 'rgb8', 21.5)
+    ahead = received.wait_for_count(3)[2]
+    assert ahead.feature_frame == 'world'

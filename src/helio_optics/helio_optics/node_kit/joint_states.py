@@ -119,7 +119,7 @@ class JointStateBuffer:
         newest = [s[-1] for s in self._stamps.values() if s]
         return max(newest) if newest else None
 
-    def at(self, stamp, tolerance, rest_hold=0.0, rest_epsilon=1e-6):
+    def at(self, stamp, tolerance, rest_hold=0.0, rest_epsilon=1e-6, rest_after_newest=True):
         """
         Return the joints at `stamp` [s] (JointLookup).
 
@@ -133,6 +133,8 @@ class JointStateBuffer:
         samples the joints at a few hertz of wall time beside a simulation running several
         times faster leaves gaps of 0.3-0.5 s of the stamps' clock: an arm held still for a
         dot keeps its pose across them, a moving one does not pass for still.
+        `rest_after_newest` False leaves out the second case (an image newer than every
+        sample: the arm may have started to move since the newest).
         """
         stamp = float(stamp)
         positions, worst = [], 0.0
@@ -155,7 +157,7 @@ class JointStateBuffer:
             nearest = min(gaps, key=gaps.get)
             if gaps[nearest] > tolerance:
                 rest = self._at_rest(stamps, values, before, after, stamp, rest_hold,
-                                     rest_epsilon)
+                                     rest_epsilon, rest_after_newest)
                 if rest is None:
                     return JointLookup(reason=f'nearest {name} is {gaps[nearest]:.3f} s from '
                                               f'the asked time (tolerance {tolerance:g} s'
@@ -170,9 +172,10 @@ class JointStateBuffer:
         return JointLookup(positions=np.array(positions), gap=worst)
 
     @staticmethod
-    def _at_rest(stamps, values, before, after, stamp, rest_hold, rest_epsilon):
+    def _at_rest(stamps, values, before, after, stamp, rest_hold, rest_epsilon,
+                 after_newest=True):
         """Return the joint's value if it rests around `stamp` (see ``at``), else None."""
-        if not rest_hold > 0.0 or before is None:
+        if not rest_hold > 0.0 or before is None or (after is None and not after_newest):
             return None
         if after is not None:
             still = abs(values[after] - values[before]) <= rest_epsilon
