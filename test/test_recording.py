@@ -110,8 +110,8 @@ def header_stamps(bag, topic):
     with AnyReader([Path(bag)]) as reader:
         connections = [c for c in reader.connections if c.topic == topic]
         for connection, _, raw in reader.messages(connections=connections):
-            stamp = reader.deserialize(raw, connection.msgtype).header.stamp
-            stamps.append(stamp.sec * 1_000_000_000 + stamp.nanosec)
+            stamps.append(stamp_to_nanoseconds(
+                reader.deserialize(raw, connection.msgtype).header.stamp))
     return sorted(stamps)
 
 

@@ -45,6 +45,10 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 
 CHANNEL_ORDER = {'rgb8': 'rgb', 'rgba8': 'rgb', 'bgr8': 'bgr', 'bgra8': 'bgr', 'mono8': 'rgb'}
 
+# joints at rest only between two equal samples: an image newer than every sample may show
+# the arm already moving off to the next pose
+REST_AFTER_NEWEST = False
+
 
 class SpotDetectorNode(Node):
     """Detect the light spot in each RGB image and publish a SpotObservation."""
@@ -161,7 +165,8 @@ class SpotDetectorNode(Node):
             self, 'features_in_optics_frame', True,
             'Compute the Eq 10 features in the optics frame from /joint_states and the rig '
             'kinematics (else, or without joint states, in the world frame).')
-        self.joint_state_tolerance, self.joint_rest_hold = declare_joint_lookup(self)
+        self.joint_state_tolerance, self.joint_rest_hold = declare_joint_lookup(
+            self, rest_after_newest=REST_AFTER_NEWEST)
         self.max_image_lag = declare(
             self, 'max_image_lag', 0.5,
             'Under use_sim_time, an image stamped more than this before the node clock is '
@@ -262,10 +267,8 @@ class SpotDetectorNode(Node):
             if order is None:
                 raise ImageConversionError(f'{msg.encoding} is not a colour or 8-bit mono '
                                            'encoding')
-            # at rest only between two equal samples: an image newer than every sample may
-            # show the arm already moving off to the next pose
             lookup = self.joints.at(stamp, self.joint_state_tolerance, self.joint_rest_hold,
-                                    rest_after_newest=False)
+                                    rest_after_newest=REST_AFTER_NEWEST)
             joints = lookup.positions
             if joints is None and (self.features_in_optics or self.world_calibrated):
                 self.get_logger().warn(

@@ -78,9 +78,9 @@ def main(args=None):
     parser.parse_args(args)
     single_threaded_numerics()
     started = time.perf_counter()
-    ran = warm_up()
-    missing = sorted(set(all_kernels()) - set(ran))
-    print(f'helio_drivers.sim.warm_up: {len(ran)} of {len(all_kernels())} kernels compiled or '
+    ran, every = warm_up(), all_kernels()
+    missing = sorted(set(every) - set(ran))
+    print(f'helio_drivers.sim.warm_up: {len(ran)} of {len(every)} kernels compiled or '
           f'loaded in {time.perf_counter() - started:.1f} s'
           + (f' (not run: {", ".join(missing)})' if missing else ''))
 

@@ -108,21 +108,24 @@ def declare(node, name, default, description, minimum=None, maximum=None, choice
     return value
 
 
-def declare_joint_lookup(node, rest_hold=1.0):
+def declare_joint_lookup(node, rest_hold=1.0, rest_after_newest=True):
     """
     Declare how a camera node finds the joints at an image's stamp; return (tolerance, hold).
 
     ``joint_state_tolerance``: the largest time between an image and the joint states used
     for it; ``joint_rest_hold``: how far from the image a joint at rest is still known
-    (``JointStateBuffer.at``'s `rest_hold`). Both [s].
+    (``JointStateBuffer.at``'s `rest_hold`; `rest_after_newest` as the node passes it there,
+    for the description). Both [s].
     """
     tolerance = declare(node, 'joint_state_tolerance', 0.3,
                         'Largest time between an image and the joint states used for it [s].',
                         0.0, 10.0)
+    at_rest = ('equal samples around the image, or the newest two equal for an image newer '
+               'than them' if rest_after_newest else 'equal samples around the image; not '
+               'for an image newer than every sample, the arm may be moving off')
     hold = declare(
         node, 'joint_rest_hold', rest_hold,
-        'A joint at rest (equal samples around the image, or the newest two equal for an '
-        'image newer than them) is known this far from the image; bridges the gaps a fast '
-        "simulated clock leaves between the drivers' wall-clock joint states while the lens "
-        'is held still (0: off) [s].', 0.0, 10.0)
+        f'A joint at rest ({at_rest}) is known this far from the image; bridges the gaps a '
+        "fast simulated clock leaves between the drivers' wall-clock joint states while the "
+        'lens is held still (0: off) [s].', 0.0, 10.0)
     return tolerance, hold
