@@ -104,6 +104,48 @@ def test_an_image_newer_than_the_joint_states_has_the_pose_of_an_arm_at_rest():
     assert not single.at(0.3, 0.1, rest_hold=0.5)
 
 
+def test_still_at_takes_an_image_only_with_the_joints_unchanged_around_it():
+    # 20 Hz of joint states, the arm held until 2.0 s, then moving
+    buffer = JointStateBuffer()
+    times = np.arange(0.0, 3.0, 0.05)
+    still_then_moving(buffer, times, start_moving=2.0)
+    lookup = buffer.still_at(1.0, 0.3, 1.0)
+    assert lookup.positions == pytest.approx(moving_joints(0.0), abs=1e-12)
+    # 0.1 s before the move: the margin of 0.3 s sees it, whichever clock was late
+    lookup = buffer.still_at(1.9, 0.3, 1.0)
+    assert not lookup and not lookup.waiting
+    assert lookup.reason.startswith('moving: dobot_j1 changed by')
+    # the plain lookup pairs a moving image with some joints: the pose of another instant
+    assert buffer.at(2.5, 0.3)
+    assert not buffer.still_at(2.5, 0.3, 1.0)
+
+
+def test_still_at_waits_for_the_joints_after_the_image_then_decides():
+    buffer = JointStateBuffer()
+    still_then_moving(buffer, np.arange(0.0, 1.05, 0.05), start_moving=10.0)
+    lookup = buffer.still_at(0.9, 0.3, 1.0)          # the newest sample is at 1.0 s
+    assert not lookup and lookup.waiting and 'after the image yet' in lookup.reason
+    # nothing more will come: the newest sample, after the image, stands for them
+    assert buffer.still_at(0.9, 0.3, 1.0, complete=True).positions == pytest.approx(
+        moving_joints(0.0), abs=1e-12)
+    # but not an image newer than every sample
+    lookup = buffer.still_at(1.1, 0.3, 1.0, complete=True)
+    assert not lookup and not lookup.waiting and 'no dobot_j1 sample after' in lookup.reason
+    still_then_moving(buffer, [1.25], start_moving=10.0)
+    assert buffer.still_at(0.9, 0.3, 1.0)
+
+
+def test_still_at_bridges_gaps_up_to_the_hold_and_needs_history_before_the_image():
+    buffer = JointStateBuffer()
+    still_then_moving(buffer, [0.0, 0.6, 1.2], start_moving=10.0)
+    assert buffer.still_at(0.6, 0.3, 0.7).gap == pytest.approx(0.6)
+    lookup = buffer.still_at(0.6, 0.3, 0.5)
+    assert not lookup and 'hold 0.5 s' in lookup.reason
+    lookup = buffer.still_at(0.2, 0.3, 1.0)
+    assert not lookup and not lookup.waiting and 'before the image' in lookup.reason
+    assert JointStateBuffer().still_at(0.0, 0.3, 1.0).waiting     # nothing received yet
+
+
 def test_latest_is_refused_when_a_driver_went_quiet():
     buffer = JointStateBuffer()
     feed_drivers(buffer, [1.0, 2.0, 3.0], [1.0])

@@ -35,6 +35,7 @@ class JointLookup:
     positions: np.ndarray = None
     reason: str = ''
     gap: float = 0.0          # largest distance from the asked time to a sample used [s]
+    waiting: bool = False     # not known yet: the samples that decide it have not come
 
     def __bool__(self):
         """Return whether joints were found."""
@@ -169,6 +170,54 @@ class JointStateBuffer:
                 continue
             positions.append(values[nearest])
             worst = max(worst, gaps[nearest])
+        return JointLookup(positions=np.array(positions), gap=worst)
+
+    def still_at(self, stamp, margin, hold, epsilon=1e-6, complete=False):
+        """
+        Return the joints at `stamp` [s] if the rig was still around it (JointLookup).
+
+        Still: every joint's samples from the last one at or before ``stamp - margin`` to the
+        first one at or after ``stamp + margin`` are equal within `epsilon` [rad], and those
+        two lie within `hold` [s] of `stamp`. `margin` covers the skew between an image's
+        stamp and the joint states' stamps (each node stamps on its own copy of the clock): a
+        lens held still gives the same joints whichever clock is a little late, a moving one
+        pairs its image with a pose from another instant (at 5 cm/s, 0.1 s is 5 mm on the
+        panel). Sec. III-C's observations are taken with the rig at rest.
+
+        While the samples after ``stamp + margin`` have not come the answer is `waiting`.
+        `complete` True (nothing more will be waited for) takes the newest sample, if it is at
+        or after `stamp`, in their place.
+        """
+        stamp = float(stamp)
+        positions, worst = [], 0.0
+        for name in self.names:
+            stamps, values = self._stamps[name], self._values[name]
+            if not stamps:
+                return JointLookup(reason=f'no {name} received yet', waiting=not complete)
+            first = bisect.bisect_right(stamps, stamp - margin) - 1
+            if first < 0:
+                return JointLookup(reason=f'no {name} sample {margin:g} s before the image '
+                                          f'(the oldest is {stamps[0] - stamp:+.3f} s from it)')
+            last = bisect.bisect_left(stamps, stamp + margin)
+            if last == len(stamps):
+                if not complete:
+                    return JointLookup(reason=f'no {name} sample {margin:g} s after the image '
+                                              'yet', waiting=True)
+                if stamps[-1] < stamp:
+                    return JointLookup(reason=f'no {name} sample after the image (the newest '
+                                              f'is {stamps[-1] - stamp:+.3f} s from it)')
+                last = len(stamps) - 1
+            gap = max(stamp - stamps[first], stamps[last] - stamp)
+            if gap > hold:
+                return JointLookup(reason=f'{name} samples around the image are {gap:.3f} s '
+                                          f'from it (hold {hold:g} s)', gap=gap)
+            span = values[first:last + 1]
+            change = max(span) - min(span)
+            if change > epsilon:
+                return JointLookup(reason=f'moving: {name} changed by {change:.2g} rad within '
+                                          f'{margin:g} s of the image', gap=gap)
+            positions.append(values[first])
+            worst = max(worst, gap)
         return JointLookup(positions=np.array(positions), gap=worst)
 
     @staticmethod
