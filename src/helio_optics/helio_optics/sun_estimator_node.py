@@ -2,9 +2,11 @@
 Node sun_estimator: estimate the sun's ray from light-spot observations (Sec. III-C, Eq 18).
 
 Subscribes ``spot`` (helio_msgs/SpotObservation) and ``joint_states`` (the drivers' partial
-messages merged by ``JointStateBuffer``); keeps the recent valid spots (FULL quality only),
-each with the lens pose from the joints at its
-image stamp and the pysolar sun position at that stamp. Service ``estimate_sun``
+messages merged by ``JointStateBuffer``); keeps the recent valid spots (FULL quality only)
+imaged while the lens was still (``still_only``: the joints unchanged around the image, as the
+paper's observations are taken; a spot waits for the joint states after its image), each
+with the lens pose from those joints and the pysolar sun position at its stamp. Service
+``estimate_sun``
 (helio_msgs/EstimateSun) moves every observation to one reference time (the middle of the
 observations used) by Eq 18, runs ``SunEstimator`` and answers with the estimate at that
 time; ``success`` only when it is trustworthy (a minimum that fits within the noise, not
@@ -15,6 +17,7 @@ under a namespace with its rig). Parameters: see ``config/sun_estimator.yaml`` (
 with descriptors; those read per estimate are dynamic, the others read-only).
 """
 
+import collections
 import copy
 from dataclasses import dataclass, replace
 import datetime
@@ -54,6 +57,16 @@ class _Buffered:
     sun: object              # pysolar SunPosition at the stamp (None: ephemeris failed)
 
 
+@dataclass
+class _Waiting:
+    """A spot waiting for the joint states around its image."""
+
+    stamp: object            # builtin_interfaces/Time of the image
+    seconds: float
+    centre: np.ndarray       # in the robot frame [m]
+    arrived: float           # node clock when it came [s]
+
+
 class SunEstimatorNode(Node):
     """Thin node around helio_optics.sun_estimation and helio_optics.ephemeris."""
 
@@ -72,6 +85,8 @@ class SunEstimatorNode(Node):
         self.site, site_file = declare_site(self)
         self.joints = JointStateBuffer()
         self._observations = []  # _Buffered, oldest first
+        self._pending = []       # _Waiting, for the joint states after their images
+        self._skipped = collections.Counter()   # spots left out since the start, by why
         self._estimate = None    # (SunEstimate message at the anchor, anchor SunPosition)
         self.estimate_publisher = self.create_publisher(
             SunEstimate, 'sun/estimate',
@@ -105,8 +120,26 @@ class SunEstimatorNode(Node):
         declare(self, 'max_observation_age', 300.0,
                 'observations older than this are dropped [s]', 0.1, 1e6, dynamic=True)
         declare(self, 'joint_state_tolerance', 0.3,
-                'largest time between a spot image and the joint state used for it [s]',
-                0.0, 10.0, dynamic=True)
+                'largest time between a spot image and the joint state used for it, when '
+                'still_only is off [s]', 0.0, 10.0, dynamic=True)
+        declare(self, 'still_only', True,
+                'use a spot only if the lens was still around its image: its joints unchanged '
+                'from still_margin before to still_margin after (a moving lens pairs the image '
+                'with joints stamped on another copy of the clock: the pose of another '
+                'instant)', dynamic=True)
+        declare(self, 'still_margin', 0.3,
+                'time around a spot image over which the joints must not change; covers the '
+                "skew between the camera's and the drivers' stamps [s]", 0.0, 10.0,
+                dynamic=True)
+        declare(self, 'still_hold', 1.0,
+                'the joint samples that show the lens still may lie this far from the image; '
+                "bridges the gaps a fast simulated clock leaves between the drivers' "
+                'wall-clock joint states [s]', 0.0, 10.0, dynamic=True)
+        declare(self, 'still_epsilon', 1e-6,
+                'largest joint change that counts as still [rad]', 0.0, 0.1, dynamic=True)
+        declare(self, 'still_wait', 3.0,
+                'longest a spot waits for the joint states after it before it is judged on '
+                'those that came (node clock) [s]', 0.0, 60.0, dynamic=True)
         declare(self, 'gain', 0.9, 'interaction-matrix gain lambda (Eq 11) [-]', 0.01, 2.0,
                 dynamic=True)
         declare(self, 'delta', 1e-5, 'interaction-matrix step delta (Eq 12) [rad]', 1e-9, 0.1,
@@ -160,6 +193,8 @@ class SunEstimatorNode(Node):
         problem = self.joints.add_message(message)
         if problem:
             self.get_logger().warning(problem, throttle_duration_sec=5.0)
+        if self._pending:
+            self._take_pending()
 
     def _on_spot(self, message):
         if not message.valid:
@@ -179,25 +214,66 @@ class SunEstimatorNode(Node):
         elif frame != 'robot':
             self.get_logger().warning(f"spot in frame '{frame}' (want world or robot): skipped")
             return
-        stamp = stamp_to_seconds(message.header.stamp)
-        lookup = self.joints.at(stamp, self._parameter('joint_state_tolerance'))
-        if not lookup:
-            self.get_logger().warning(f'spot skipped: {lookup.reason}',
-                                      throttle_duration_sec=2.0)
-            return
+        self._pending.append(_Waiting(message.header.stamp, stamp_to_seconds(message.header.stamp),
+                                      centre, self._now_seconds()))
+        overflow = len(self._pending) - self._parameter('max_observations')
+        if overflow > 0:
+            self._skip('no joint states came after them', overflow)
+            del self._pending[:overflow]
+        self._take_pending()
+
+    def _take_pending(self, complete=False):
+        """
+        Pair the waiting spots with the lens pose at their image stamps, or drop them.
+
+        With ``still_only`` a spot waits until the joint states ``still_margin`` after its
+        image have come (at most ``still_wait``, or until an estimate is asked for:
+        `complete`), so a lens that started to move just after the image is seen.
+        """
+        p = self._parameter
+        now, waiting = self._now_seconds(), []
+        for spot in self._pending:
+            final = complete or now - spot.arrived > p('still_wait')
+            if p('still_only'):
+                lookup = self.joints.still_at(spot.seconds, p('still_margin'), p('still_hold'),
+                                              p('still_epsilon'), complete=final)
+            else:
+                lookup = self.joints.at(spot.seconds, p('joint_state_tolerance'))
+            if lookup.waiting and not final:
+                waiting.append(spot)
+            elif not lookup:
+                self._skip(lookup.reason)
+            else:
+                self._observe(spot, lookup.positions)
+        self._pending = waiting
+
+    def _skip(self, reason, count=1):
+        moving = reason.startswith('moving')
+        self._skipped['while the lens moved' if moving else 'for their joints'] += count
+        log = self.get_logger().debug if moving else self.get_logger().warning
+        log(f'spot skipped: {reason}', throttle_duration_sec=2.0)
+
+    def _observe(self, spot, joints):
         T_world = self.rig.parameters.T_robot_world
-        observation = Observation(centre, self.rig.forward(lookup.positions).T_robot_lens,
+        observation = Observation(spot.centre, self.rig.forward(joints).T_robot_lens,
                                   T_world[:3, 3], T_world[:3, 2], self._parameter('centre_sigma'))
-        sun = self._sun_at(stamp_to_nanoseconds(message.header.stamp))
-        self._observations.append(_Buffered(message.header.stamp, stamp, observation, sun))
+        sun = self._sun_at(stamp_to_nanoseconds(spot.stamp))
+        self._observations.append(_Buffered(spot.stamp, spot.seconds, observation, sun))
+        self._observations.sort(key=lambda b: b.seconds)
         del self._observations[:-self._parameter('max_observations')]
 
+    def _now_seconds(self):
+        return self.get_clock().now().nanoseconds * 1e-9
+
     # -- estimation --------------------------------------------------------------------------
-    def _recent_observations(self, limit):
-        now = self.get_clock().now().nanoseconds * 1e-9
+    def _recent_observations(self, limit, since=0.0):
+        """Return the last `limit` (0: all) observations imaged at or after `since` [s]."""
+        self._take_pending(complete=True)
+        now = self._now_seconds()
         age = self._parameter('max_observation_age')
         self._observations = [b for b in self._observations if now - b.seconds <= age]
-        return self._observations[-limit:] if limit else list(self._observations)
+        recent = [b for b in self._observations if b.seconds >= since]
+        return recent[-limit:] if limit else recent
 
     def _on_estimate_sun(self, request, response):
         method = request.method or self._parameter('method')
@@ -205,11 +281,14 @@ class SunEstimatorNode(Node):
             response.success = False
             response.message = f'unknown method {method!r}; use one of {METHODS}'
             return response
-        buffered = self._recent_observations(int(request.max_observations))
+        since = stamp_to_seconds(request.since)
+        buffered = self._recent_observations(int(request.max_observations), since)
         if not buffered:
             response.success = False
             response.message = ('no valid spot observation with joint states in the last '
-                                f"{self._parameter('max_observation_age'):g} s")
+                                f"{self._parameter('max_observation_age'):g} s"
+                                + (f' imaged since {since:.3f} s' if since > 0.0 else '')
+                                + self._skipped_note())
             return response
         try:
             trust = self._trust()
@@ -252,7 +331,8 @@ class SunEstimatorNode(Node):
             for i, reason in result.outliers)) if result.outliers else ''
         if not result.trustworthy:
             response.message = (f'{method}: estimate not trustworthy {time_note}: '
-                                f'{result.reason or "not converged"}{outliers}')
+                                f'{result.reason or "not converged"}{outliers}'
+                                f'{self._skipped_note()}')
             self.get_logger().warning(response.message)
             return response
         if anchor is not None:
@@ -265,9 +345,16 @@ class SunEstimatorNode(Node):
             f'{math.degrees(result.theta0):.3f} deg (sigma {spread[0]:.3f}, {spread[1]:.3f} deg) '
             f'{time_note} from {result.observations} observations in {result.iterations} '
             f'iterations; fit chi-square {result.chi2:.3g} <= {result.chi2_threshold:.3g} '
-            f'({result.dof} degrees of freedom){outliers}')
+            f'({result.dof} degrees of freedom){outliers}{self._skipped_note()}')
         self.get_logger().info(response.message)
         return response
+
+    def _skipped_note(self):
+        """Say how many spots were left out before any fit, and why ('' when none)."""
+        if not self._skipped:
+            return ''
+        return '; spots left out since the start: ' + ', '.join(
+            f'{count} {why}' for why, count in sorted(self._skipped.items()))
 
     def _message(self, result, buffered, reference_stamp, anchor, corrected):
         """Build the SunEstimate at the reference time (header.stamp = anchor_stamp)."""

@@ -28,6 +28,7 @@ from sensor_msgs.msg import JointState
 import yaml
 
 SUN = -direction_from_angles(math.radians(40.0), math.radians(200.0))  # elevation 50 deg
+HELD = 0.4    # a test's lens is held still this long before and after each image [s]
 CONFIG = os.path.join(os.path.dirname(__file__), '..', 'config', 'sun_estimator.yaml')
 # The documented range of every numeric parameter (README, config/sun_estimator.yaml units):
 # what the node declared before and must keep declaring. Ints get integer ranges.
@@ -40,14 +41,17 @@ RANGES = {
     'fit_alpha': (1e-12, 0.5), 'outlier_alpha': (1e-15, 0.5),
     'max_outlier_fraction': (0.01, 1.0), 'step_tolerance': (1e-6, 1.0),
     'ambiguity_chi2': (0.01, 1000.0), 'ambiguity_separation_deg': (1e-4, 10.0),
-    'plane_tolerance': (1e-6, 1.0), 'min_chief_ray_elevation_deg': (0.0, 80.0)}
+    'plane_tolerance': (1e-6, 1.0), 'min_chief_ray_elevation_deg': (0.0, 80.0),
+    'still_margin': (0.0, 10.0), 'still_hold': (0.0, 10.0), 'still_epsilon': (0.0, 0.1),
+    'still_wait': (0.0, 60.0)}
 # Read each time an estimate is made: may change while the node runs. Every other parameter
 # is read at start-up and declared read-only.
 DYNAMIC = {'method', 'centre_sigma', 'max_observations', 'max_observation_age',
            'joint_state_tolerance', 'gain', 'delta', 'tolerance', 'max_iterations',
            'fit_alpha', 'outlier_alpha', 'max_outlier_fraction', 'step_tolerance',
            'ambiguity_chi2', 'ambiguity_separation_deg', 'plane_tolerance',
-           'min_chief_ray_elevation_deg'}
+           'min_chief_ray_elevation_deg', 'still_only', 'still_margin', 'still_hold',
+           'still_epsilon', 'still_wait'}
 
 
 @pytest.fixture
@@ -153,30 +157,44 @@ class Rigged:
                               and self.spots.get_subscription_count() >= 1,
                               what='the node subscribing')
 
-    def observe(self, x, seconds, sun, shift=(0.0, 0.0, 0.0), quality=SpotObservation.FULL):
-        """Publish the joints x and the spot `sun` casts, both stamped `seconds` [s]."""
-        stamp = stamp_from_seconds(seconds)
-        seconds = stamp_to_seconds(stamp)     # what the node reads from the header
-        # as the drivers publish them: the arm (with the unused end servo), then the wrist
+    def publish_joints(self, x, seconds):
+        """Publish joints x stamped `seconds` [s] as the drivers do: arm, then wrist."""
         arm = JointState(name=['dobot_j1', 'dobot_j2', 'dobot_j3', 'dobot_j4'],
-                         position=[float(v) for v in x[:3]] + [0.0])
+                         position=[float(v) for v in x[:3]] + [0.0])     # the unused j4
         wrist = JointState(name=['lens_yaw', 'lens_pitch'], position=[float(v) for v in x[3:]])
-        arm.header.stamp = wrist.header.stamp = stamp
+        arm.header.stamp = wrist.header.stamp = stamp_from_seconds(seconds)
         self.joints.publish(arm)
         self.joints.publish(wrist)
+
+    def observe(self, x, seconds, sun, shift=(0.0, 0.0, 0.0), quality=SpotObservation.FULL):
+        """
+        Hold the lens at joints x around `seconds` [s] and publish the spot `sun` casts then.
+
+        The joints come HELD seconds before, at and after the image (a lens held still, as
+        the sweep holds it); poses of one sweep are therefore at least 2 HELD apart.
+        """
+        stamp = stamp_from_seconds(seconds)
+        seconds = stamp_to_seconds(stamp)     # what the node reads from the header
+        for offset in (-HELD, 0.0, HELD):
+            self.publish_joints(x, seconds + offset)
+        spot = self.spot(x, seconds, sun, shift, quality)
+        self.graph.wait_until(lambda: self.node.joints.at(seconds + HELD, 1e-6),
+                              what=f'both joint-state parts at {seconds + HELD} s')
+        count = len(self.node._observations)
+        self.spots.publish(spot)
+        return stamp, count
+
+    def spot(self, x, seconds, sun, shift=(0.0, 0.0, 0.0), quality=SpotObservation.FULL):
+        """Return the spot `sun` casts through the lens at joints x, imaged at `seconds`."""
         T_robot_world = self.rig.parameters.T_robot_world
         truth = self.node.estimator.synthetic_observation(
             sun, self.rig.forward(x).T_robot_lens, T_robot_world[:3, 3], T_robot_world[:3, 2])
         centre_world = transform_points(invert_transform(T_robot_world), truth.centre) + shift
         spot = SpotObservation(valid=True, quality=quality)
-        spot.header.stamp = stamp
+        spot.header.stamp = stamp_from_seconds(seconds)
         spot.header.frame_id = 'world'
         spot.center.x, spot.center.y, spot.center.z = (float(v) for v in centre_world)
-        self.graph.wait_until(lambda: self.node.joints.at(seconds, 0.0),
-                              what=f'both joint-state parts at {seconds} s')
-        count = len(self.node._observations)
-        self.spots.publish(spot)
-        return stamp, count
+        return spot
 
     def recorded(self, count):
         """Wait until the node holds more than `count` observations."""
@@ -205,7 +223,7 @@ def test_service_estimates_the_sun_from_partial_joint_states_and_publishes_it(gr
     rigged.spots.publish(SpotObservation(valid=False, reason='no spot'))
     start = in_process.helper.get_clock().now().nanoseconds * 1e-9
     for k, x in enumerate(sweep_joints(rigged.rig)):
-        rigged.recorded(rigged.observe(x, start + 0.25 * k, SUN)[1])
+        rigged.recorded(rigged.observe(x, start + 2.5 * HELD * k, SUN)[1])
 
     for method in ('levenberg_marquardt', 'interaction_matrix'):
         response = rigged.estimate(method)
@@ -235,7 +253,7 @@ def test_an_outlier_is_named_by_its_stamp_and_an_untrustworthy_estimate_is_not_p
     joints = sweep_joints(rigged.rig, offsets_deg=np.arange(-10.0, 11.0, 2.5))
     # Every spot 1 cm off alternately: no sun fits, nothing may be published.
     for k, x in enumerate(joints):
-        rigged.recorded(rigged.observe(x, start + 0.25 * k, SUN,
+        rigged.recorded(rigged.observe(x, start + 2.5 * HELD * k, SUN,
                                        shift=(0.0, 0.01 * (-1) ** k, 0.0))[1])
     response = rigged.estimate()
     assert not response.success
@@ -243,10 +261,10 @@ def test_an_outlier_is_named_by_its_stamp_and_an_untrustworthy_estimate_is_not_p
     assert not response.estimate.converged and response.estimate.reason
     assert response.estimate.fit_chi2 > response.estimate.fit_threshold
     # The same sweep again, right, with one spot 3 cm off: it is left out and named.
-    start += 10.0
+    start += 30.0
     stamps = []
     for k, x in enumerate(joints):
-        stamp, count = rigged.observe(x, start + 0.25 * k, SUN,
+        stamp, count = rigged.observe(x, start + 2.5 * HELD * k, SUN,
                                       shift=(0.03, 0.0, 0.0) if k == 4 else (0.0, 0.0, 0.0))
         rigged.recorded(count)
         stamps.append(stamp)
@@ -259,6 +277,13 @@ def test_an_outlier_is_named_by_its_stamp_and_an_untrustworthy_estimate_is_not_p
     assert 'left out' in response.message
     assert wild not in list(response.estimate.observation_stamps)
     assert angle_deg(vector(response.estimate.direction), SUN) < 0.05
+    # the same observations chosen by time: those imaged since the second sweep began
+    since = in_process.call(rigged.client, EstimateSun.Request(since=stamps[0]), timeout=30.0)
+    assert since.success, since.message
+    assert list(since.estimate.observation_stamps) == list(response.estimate.observation_stamps)
+    later = in_process.call(rigged.client, EstimateSun.Request(
+        since=stamp_from_seconds(start + 1000.0)), timeout=30.0)
+    assert not later.success and 'imaged since' in later.message
     # The first thing ever published on sun/estimate is the trustworthy one.
     first = estimates.wait_for_count(1)[0]
     assert first.converged and first.outliers == 1 and first.anchor_stamp == \
@@ -323,3 +348,48 @@ def test_only_full_spots_are_used(graph):
     rigged.observe(x, start, SUN, quality=SpotObservation.CUT_BY_BORDER)
     rigged.recorded(rigged.observe(x, start + 0.1, SUN)[1])
     assert [b.seconds for b in node._observations] == [pytest.approx(start + 0.1)]
+
+
+def test_a_spot_imaged_while_the_lens_moved_is_left_out_and_counted(graph):
+    node, in_process = graph
+    rigged = Rigged(node, in_process)
+    start = in_process.helper.get_clock().now().nanoseconds * 1e-9
+    poses = sweep_joints(rigged.rig)
+    for k, x in enumerate(poses):
+        rigged.recorded(rigged.observe(x, start + 2.5 * HELD * k, SUN)[1])
+    # the lens moves from the last pose to the first; a spot imaged on the way (with the
+    # centre the last pose casts: a camera and drivers on skewed clocks) is not paired
+    moved_at = start + 2.5 * HELD * len(poses)
+    rigged.publish_joints(poses[-1], moved_at)
+    rigged.spots.publish(rigged.spot(poses[-1], moved_at + 0.1, SUN))
+    in_process.wait_until(lambda: node._pending, what='the spot waiting for later joints')
+    assert len(node._observations) == len(poses)
+    rigged.publish_joints(0.5 * (poses[-1] + poses[0]), moved_at + 0.2)
+    rigged.publish_joints(poses[0], moved_at + 0.5)
+    in_process.wait_until(lambda: not node._pending, what='the spot judged')
+    assert len(node._observations) == len(poses)
+    response = rigged.estimate()
+    assert response.success, response.message
+    assert response.estimate.observations == len(poses)
+    assert '1 while the lens moved' in response.message
+
+
+def test_a_spot_still_waiting_for_joints_is_judged_on_those_there_when_asked(graph):
+    node, in_process = graph
+    rigged = Rigged(node, in_process)
+    start = in_process.helper.get_clock().now().nanoseconds * 1e-9
+    poses = sweep_joints(rigged.rig)
+    for k, x in enumerate(poses[:-1]):
+        rigged.recorded(rigged.observe(x, start + 2.5 * HELD * k, SUN)[1])
+    # the last pose's image 0.1 s before its newest joints: the estimate is asked for at
+    # once, before the joints 0.3 s after it come
+    last = start + 2.5 * HELD * (len(poses) - 1)
+    for seconds in (last - HELD, last):
+        rigged.publish_joints(poses[-1], seconds)
+    in_process.wait_until(lambda: node.joints.at(last, 1e-6), what='the last joints')
+    rigged.spots.publish(rigged.spot(poses[-1], last - 0.1, SUN))
+    in_process.wait_until(lambda: node._pending, what='the spot waiting for later joints')
+    response = rigged.estimate()
+    assert response.success, response.message
+    assert response.estimate.observations == len(poses)
+    assert not node._pending
