@@ -36,6 +36,13 @@ from helio_optics.config_files import config_path
 from helio_optics.node_kit.processes import NodeProcess, ProcessGroup
 
 DDS_PROFILE_ENV = 'FASTRTPS_DEFAULT_PROFILES_FILE'
+# Reply timeout per attempt of both drivers against the emulated devices [s]. A real Dobot
+# answers within 0.2 s and a Maestro within 0.1 s (the drivers' defaults); the emulators
+# answer from threads of the sim_world process, which shares a 2-core machine with the whole
+# graph, and stalled past three such attempts when eight processes started at once: the
+# first move of a graph then failed with "no 2-byte reply within 0.100 s after 3 attempts"
+# (twice in six full test runs, 2026-11-24). The in-process driver tests use 0.5 s too.
+SIMULATED_DEVICE_REPLY_TIMEOUT = 0.5
 
 
 @dataclass
@@ -121,9 +128,10 @@ def simulated_graph(port_dir, nodes=None, overrides=None):
     """
     dobot_port = os.path.join(port_dir, 'dobot')
     servo_port = os.path.join(port_dir, 'servo')
+    timeout = SIMULATED_DEVICE_REPLY_TIMEOUT
     wiring = {'sim_world': {'dobot_port': dobot_port, 'servo_port': servo_port},
-              'dobot_driver': {'port': dobot_port},
-              'servo_driver': {'port': servo_port}}
+              'dobot_driver': {'port': dobot_port, 'timeout': timeout},
+              'servo_driver': {'port': servo_port, 'timeout': timeout}}
     return _select(SIMULATED_NODES, 'simulated', wiring, nodes, overrides)
 
 
