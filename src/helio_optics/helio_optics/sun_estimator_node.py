@@ -227,19 +227,20 @@ class SunEstimatorNode(Node):
         Pair the waiting spots with the lens pose at their image stamps, or drop them.
 
         With ``still_only`` a spot waits until the joint states ``still_margin`` after its
-        image have come (at most ``still_wait``, or until an estimate is asked for:
-        `complete`), so a lens that started to move just after the image is seen.
+        image have come, so a lens that started to move just after the image is seen. When
+        an estimate is asked for (`complete`) the newest joints stand in for those; a spot
+        newer than every joint sample keeps waiting, at most ``still_wait``.
         """
         p = self._parameter
         now, waiting = self._now_seconds(), []
         for spot in self._pending:
-            final = complete or now - spot.arrived > p('still_wait')
+            expired = now - spot.arrived > p('still_wait')
             if p('still_only'):
                 lookup = self.joints.still_at(spot.seconds, p('still_margin'), p('still_hold'),
-                                              p('still_epsilon'), complete=final)
+                                              p('still_epsilon'), complete=complete or expired)
             else:
                 lookup = self.joints.at(spot.seconds, p('joint_state_tolerance'))
-            if lookup.waiting and not final:
+            if lookup.waiting and not expired:
                 waiting.append(spot)
             elif not lookup:
                 self._skip(lookup.reason)

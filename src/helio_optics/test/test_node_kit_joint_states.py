@@ -128,9 +128,9 @@ def test_still_at_waits_for_the_joints_after_the_image_then_decides():
     # nothing more will come: the newest sample, after the image, stands for them
     assert buffer.still_at(0.9, 0.3, 1.0, complete=True).positions == pytest.approx(
         moving_joints(0.0), abs=1e-12)
-    # but not an image newer than every sample
+    # but not an image newer than every sample: that one still waits
     lookup = buffer.still_at(1.1, 0.3, 1.0, complete=True)
-    assert not lookup and not lookup.waiting and 'no dobot_j1 sample after' in lookup.reason
+    assert not lookup and lookup.waiting and 'no dobot_j1 sample after' in lookup.reason
     still_then_moving(buffer, [1.25], start_moving=10.0)
     assert buffer.still_at(0.9, 0.3, 1.0)
 

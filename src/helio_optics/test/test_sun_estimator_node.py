@@ -388,8 +388,13 @@ def test_a_spot_still_waiting_for_joints_is_judged_on_those_there_when_asked(gra
         rigged.publish_joints(poses[-1], seconds)
     in_process.wait_until(lambda: node.joints.at(last, 1e-6), what='the last joints')
     rigged.spots.publish(rigged.spot(poses[-1], last - 0.1, SUN))
-    in_process.wait_until(lambda: node._pending, what='the spot waiting for later joints')
+    # and one imaged after every joint sample: its pose is not known yet, it keeps waiting
+    rigged.spots.publish(rigged.spot(poses[-1], last + 0.1, SUN))
+    in_process.wait_until(lambda: len(node._pending) == 2, what='both spots waiting')
     response = rigged.estimate()
     assert response.success, response.message
     assert response.estimate.observations == len(poses)
-    assert not node._pending
+    assert [spot.seconds for spot in node._pending] == [pytest.approx(last + 0.1)]
+    rigged.publish_joints(poses[-1], last + 0.5)
+    in_process.wait_until(lambda: not node._pending, what='the newer spot judged')
+    assert rigged.estimate().estimate.observations == len(poses) + 1

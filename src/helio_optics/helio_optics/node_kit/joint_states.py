@@ -185,8 +185,8 @@ class JointStateBuffer:
         panel). Sec. III-C's observations are taken with the rig at rest.
 
         While the samples after ``stamp + margin`` have not come the answer is `waiting`.
-        `complete` True (nothing more will be waited for) takes the newest sample, if it is at
-        or after `stamp`, in their place.
+        `complete` True (an answer is needed now) takes the newest sample, if it is at or after
+        `stamp`, in their place; with none after `stamp` the answer is still `waiting`.
         """
         stamp = float(stamp)
         positions, worst = [], 0.0
@@ -205,7 +205,8 @@ class JointStateBuffer:
                                               'yet', waiting=True)
                 if stamps[-1] < stamp:
                     return JointLookup(reason=f'no {name} sample after the image (the newest '
-                                              f'is {stamps[-1] - stamp:+.3f} s from it)')
+                                              f'is {stamps[-1] - stamp:+.3f} s from it)',
+                                       waiting=True)
                 last = len(stamps) - 1
             gap = max(stamp - stamps[first], stamps[last] - stamp)
             if gap > hold:
