@@ -141,6 +141,19 @@ def test_a_new_real_time_factor_paces_from_the_present_on():
     assert pacer.achieved(101.1, 52.0) == pytest.approx(52.0 / 1.1)
 
 
+def test_a_pacer_behind_catches_up_only_within_max_lag():
+    # 1x, one step of 0.1 s took 0.3 s of wall time: 0.2 s behind
+    catching = Pacer(real_time_factor=1.0, max_lag=0.5)
+    never = Pacer(real_time_factor=1.0, max_lag=0.0)
+    for pacer in (catching, never):
+        assert pacer.delay(100.0, 0.0) == 0.0
+        assert pacer.delay(100.3, 0.1) == 0.0                   # late: step at once
+    # the next step is due at 100.2 on the old anchor: the one that catches up steps at once,
+    # the other counts from where it is (0.1 s of wall time for 0.1 s simulated)
+    assert catching.delay(100.3, 0.2) == 0.0
+    assert never.delay(100.3, 0.2) == pytest.approx(0.1)
+
+
 def test_lockstep_holds_the_world_at_most_lead_ahead_of_its_consumer_and_not_forever():
     lockstep = Lockstep(lead=0.35, timeout=1.0)
     assert not lockstep.hold(100.0, 0.0)           # no consumer yet: free running

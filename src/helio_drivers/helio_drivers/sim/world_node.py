@@ -257,7 +257,12 @@ class SimWorldNode(Node):
         # the intrinsics do not change: each CameraInfo is built once, restamped per frame
         self._thermal_info = camera_info_from_camera(self.world.thermal.camera, None, 'thermal')
         self._rgb_info = camera_info_from_camera(self.world.rgb.camera, None, 'rgb')
-        self._pacer = Pacer(self.real_time_factor)
+        self._pacer = Pacer(self.real_time_factor, declare(
+            self, 'pace_max_lag', 0.5,
+            'How far behind its real_time_factor the world may fall and still catch up, by '
+            'stepping back to back; farther behind it goes on from where it is (0: never '
+            'races to catch up, simulated time never runs faster than the factor) [s wall]',
+            0.0, 60.0))
         lockstep_topic = declare(
             self, 'lockstep_topic', 'thermal/stats',
             'helio_msgs/ThermalStats topic answering each thermal image: the world runs at '
