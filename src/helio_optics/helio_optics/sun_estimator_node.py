@@ -249,10 +249,12 @@ class SunEstimatorNode(Node):
         self._pending = waiting
 
     def _skip(self, reason, count=1):
-        moving = reason.startswith('moving')
-        self._skipped['while the lens moved' if moving else 'for their joints'] += count
-        log = self.get_logger().debug if moving else self.get_logger().warning
-        log(f'spot skipped: {reason}', throttle_duration_sec=2.0)
+        if reason.startswith('moving'):       # every move of a sweep: counted, not warned
+            self._skipped['while the lens moved'] += count
+            self.get_logger().debug(f'spot skipped: {reason}', throttle_duration_sec=2.0)
+        else:                                 # two call sites: each its own throttle
+            self._skipped['for their joints'] += count
+            self.get_logger().warning(f'spot skipped: {reason}', throttle_duration_sec=2.0)
 
     def _observe(self, spot, joints):
         T_world = self.rig.parameters.T_robot_world
