@@ -150,8 +150,9 @@ class Rig:
 def rig(tmp_path_factory):
     """Run the whole graph once for the module; the painter may be killed by a test."""
     tmp_path = tmp_path_factory.mktemp('safety')
-    # pace_max_lag 0: paced at 1x for the kill, the world must not race to catch up, which
-    # would stretch the graph's wall-clock reaction over more simulated seconds
+    # pace_max_lag 0: paced at 1x for the kill (and at the lockstep fallback's 1x while the
+    # thermal monitor is stopped), the world must not race to catch up, which would stretch
+    # the graph's wall-clock reaction over more simulated seconds
     overrides = {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000,
                                'canvas_rate': 1.0, 'truth_period': 0.05, 'pace_max_lag': 0.0},
                  'lens_planner': {'calibration_dir': str(tmp_path / 'calibration')},

@@ -257,12 +257,13 @@ class SimWorldNode(Node):
         # the intrinsics do not change: each CameraInfo is built once, restamped per frame
         self._thermal_info = camera_info_from_camera(self.world.thermal.camera, None, 'thermal')
         self._rgb_info = camera_info_from_camera(self.world.rgb.camera, None, 'rgb')
-        self._pacer = Pacer(self.real_time_factor, declare(
+        max_lag = declare(
             self, 'pace_max_lag', 0.5,
-            'How far behind its real_time_factor the world may fall and still catch up, by '
-            'stepping back to back; farther behind it goes on from where it is (0: never '
-            'races to catch up, simulated time never runs faster than the factor) [s wall]',
-            0.0, 60.0))
+            'How far behind its pace (real_time_factor, or lockstep_fallback_factor) the '
+            'world may fall and still catch up, by stepping back to back; farther behind it '
+            'goes on from where it is (0: never races to catch up, simulated time never runs '
+            'faster than the pace) [s wall]', 0.0, 60.0)
+        self._pacer = Pacer(self.real_time_factor, max_lag)
         lockstep_topic = declare(
             self, 'lockstep_topic', 'thermal/stats',
             'helio_msgs/ThermalStats topic answering each thermal image: the world runs at '
@@ -279,7 +280,7 @@ class SimWorldNode(Node):
         self._left_behind_pacer = Pacer(declare(
             self, 'lockstep_fallback_factor', 1.0,
             'Real-time factor while lockstep_topic is silent past lockstep_timeout (at '
-            'real_time_factor 0) [simulated s per wall s]', 0.01, 1000.0))
+            'real_time_factor 0) [simulated s per wall s]', 0.01, 1000.0), max_lag)
         self._was_left_behind = False
         self._lockstep_heard = threading.Event()
         if lockstep_topic:
