@@ -218,7 +218,7 @@ class SunEstimatorNode(Node):
                                       centre, self._now_seconds()))
         overflow = len(self._pending) - self._parameter('max_observations')
         if overflow > 0:
-            self._skip('no joint states came after them', overflow)
+            self._skip('no joint states came after them', count=overflow)
             del self._pending[:overflow]
         self._take_pending()
 
@@ -243,13 +243,13 @@ class SunEstimatorNode(Node):
             if lookup.waiting and not expired:
                 waiting.append(spot)
             elif not lookup:
-                self._skip(lookup.reason)
+                self._skip(lookup.reason, moving=lookup.moving)
             else:
                 self._observe(spot, lookup.positions)
         self._pending = waiting
 
-    def _skip(self, reason, count=1):
-        if reason.startswith('moving'):       # every move of a sweep: counted, not warned
+    def _skip(self, reason, moving=False, count=1):
+        if moving:                            # every move of a sweep: counted, not warned
             self._skipped['while the lens moved'] += count
             self.get_logger().debug(f'spot skipped: {reason}', throttle_duration_sec=2.0)
         else:                                 # two call sites: each its own throttle

@@ -113,7 +113,7 @@ def test_still_at_takes_an_image_only_with_the_joints_unchanged_around_it():
     assert lookup.positions == pytest.approx(moving_joints(0.0), abs=1e-12)
     # 0.1 s before the move: the margin of 0.3 s sees it, whichever clock was late
     lookup = buffer.still_at(1.9, 0.3, 1.0)
-    assert not lookup and not lookup.waiting
+    assert not lookup and not lookup.waiting and lookup.moving
     assert lookup.reason.startswith('moving: dobot_j1 changed by')
     # the plain lookup pairs a moving image with some joints: the pose of another instant
     assert buffer.at(2.5, 0.3)
@@ -140,7 +140,7 @@ def test_still_at_bridges_gaps_up_to_the_hold_and_needs_history_before_the_image
     still_then_moving(buffer, [0.0, 0.6, 1.2], start_moving=10.0)
     assert buffer.still_at(0.6, 0.3, 0.7).gap == pytest.approx(0.6)
     lookup = buffer.still_at(0.6, 0.3, 0.5)
-    assert not lookup and 'hold 0.5 s' in lookup.reason
+    assert not lookup and not lookup.moving and 'hold 0.5 s' in lookup.reason
     lookup = buffer.still_at(0.2, 0.3, 1.0)
     assert not lookup and not lookup.waiting and 'before the image' in lookup.reason
     assert JointStateBuffer().still_at(0.0, 0.3, 1.0).waiting     # nothing received yet

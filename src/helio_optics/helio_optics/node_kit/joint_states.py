@@ -36,6 +36,7 @@ class JointLookup:
     reason: str = ''
     gap: float = 0.0          # largest distance from the asked time to a sample used [s]
     waiting: bool = False     # not known yet: the samples that decide it have not come
+    moving: bool = False      # refused because a joint changed around the asked time
 
     def __bool__(self):
         """Return whether joints were found."""
@@ -216,7 +217,7 @@ class JointStateBuffer:
             change = max(span) - min(span)
             if change > epsilon:
                 return JointLookup(reason=f'moving: {name} changed by {change:.2g} rad within '
-                                          f'{margin:g} s of the image', gap=gap)
+                                          f'{margin:g} s of the image', gap=gap, moving=True)
             positions.append(values[first])
             worst = max(worst, gap)
         return JointLookup(positions=np.array(positions), gap=worst)
