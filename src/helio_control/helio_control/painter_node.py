@@ -20,16 +20,16 @@ Beyond the paper:
 - **clouds**: a loss of sun while heating (``dot_cycle``: N_p or T_max falling, or no light
   spot) retreats the lens and waits for the sun (the spot seen again in a row of frames, at
   most ``cloud_timeout``), then heats the same dot again with its full target;
-- **fire-safety watchdog**: the lens never rests at the heating distance without fresh
-  thermal data. Thermal statistics older than ``thermal_stale`` (node clock, or
-  ``thermal_stale_wall`` of wall time), a dot held past ``max_heating``, a device fault or
-  alarm (``dobot/status``, ``servo/status``), a cancel, or the node stopping: the lens
-  retreats at once (``focus`` at the retreat distance; if the arm cannot move, the wrist
-  turns the lens off the sun). A stale stream then gets ``thermal_back_timeout`` to come
-  back (the dot is heated again from the start, and the result counts it); everything
-  else ends the goal saying why. A window-rule frame without a camera pose is fresh data
-  without a window reading: heat on while the image's N_p is below the target (the window
-  lies in the image), else it counts towards ``thermal_stale``;
+- **fire-safety watchdog**: the lens never rests at the heating distance without fresh thermal
+  data. Thermal statistics older than ``thermal_stale`` (node clock, or ``thermal_stale_wall`` of
+  wall time), a dot held past ``max_heating``, a device fault or alarm (``dobot/status``,
+  ``servo/status``), a cancel, or the node stopping: the lens retreats at once (``focus`` at the
+  retreat distance; if the arm cannot move, the wrist turns the lens off the sun: a ``move_wrist``
+  escape goal, at the servos' own speed). A stale stream then gets ``thermal_back_timeout`` to come
+  back (the dot is heated again from the start, and the result counts it); everything else ends the
+  goal saying why. A window-rule frame without a camera pose is fresh data without a window
+  reading: heat on while the image's N_p is below the target (the window lies in the image), else
+  it counts towards ``thermal_stale``;
 - **resume**: every finished dot is appended (and flushed) to the run's ``journal.jsonl``;
   the same goal sent again continues an unfinished run at its first unburnt dot, with the
   same plan, none lost and none doubled (``fresh`` starts over; ``start_index`` skips the
@@ -393,7 +393,8 @@ class PainterNode(Node):
             pitch = float(self.wrist_now.get('lens_pitch', 0.0))
             pitch += -self.wrist_turn if pitch > 0.0 else self.wrist_turn
             result = await self._run_action(self.wrist, 'move_wrist',
-                                            MoveWrist.Goal(yaw=yaw, pitch=pitch))
+                                            MoveWrist.Goal(yaw=yaw, pitch=pitch,
+                                                           escape=True))
             if result.success:
                 self._at_heating = None
                 return f'the arm could not retreat ({failure}); the wrist turned the lens away'

@@ -86,6 +86,13 @@ class MaestroEmulator(PtyDevice):
         with self._lock:
             return [channel.target_qus / 4.0 for channel in self._channels]
 
+    def motion_limits(self):
+        """Return every channel's (speed [us/s], acceleration [us/s^2]); inf = unlimited."""
+        with self._lock:
+            return [(c.speed * proto.SPEED_UNIT_US_PER_S if c.speed else math.inf,
+                     c.acceleration * proto.ACCELERATION_UNIT_US_PER_S2 if c.acceleration
+                     else math.inf) for c in self._channels]
+
     def joint_positions(self):
         """Return the angle [rad] of every calibrated joint now, by name."""
         pulses = self.pulse_widths_us()

@@ -1,16 +1,18 @@
 """
 Node servo_driver: the two wrist servos (lens yaw, lens pitch) on a Pololu Maestro.
 
-- action ``move_wrist`` (helio_msgs/MoveWrist): yaw and pitch [rad] are converted to pulse
-  widths with each channel's calibration (``yaw.*``, ``pitch.*`` parameters, see
-  config/servo_driver.yaml); an angle outside a channel's pulse range is refused naming the
-  joint, and so is one beyond a limit the Maestro itself was found to impose. The goal
-  succeeds when both reported positions are within ``position_tolerance_us`` of their
-  targets; feedback carries the current angles. When the Maestro stops a servo short of
-  its target (its own channel range is narrower than the configured one: a factory-new
-  Maestro allows 992..2000 us), the goal aborts at once saying so, and the limit is
-  remembered. Cancel, a move longer than ``move_timeout`` on the node clock (or
-  ``move_wall_timeout`` of wall time) and every device error hold both servos where they
+- action ``move_wrist`` (helio_msgs/MoveWrist): yaw and pitch [rad] are converted to pulse widths
+  with each channel's calibration (``yaw.*``, ``pitch.*`` parameters, see
+  config/servo_driver.yaml); an angle outside a channel's pulse range is refused naming the joint,
+  and so is one beyond a limit the Maestro itself was found to impose. The goal succeeds when both
+  reported positions are within ``position_tolerance_us`` of their targets; feedback carries the
+  current angles. A goal with ``escape`` (a retreat: the painter turning the lens off the sun when
+  the arm cannot move) runs at ``escape_speed_us_per_s`` and ``escape_acceleration_us_per_s2`` on
+  both channels instead of the per-axis limits; every move sets its channel limits before its
+  targets. When the Maestro stops a servo short of its target (its own channel range is narrower
+  than the configured one: a factory-new Maestro allows 992..2000 us), the goal aborts at once
+  saying so, and the limit is remembered. Cancel, a move longer than ``move_timeout`` on the node
+  clock (or ``move_wall_timeout`` of wall time) and every device error hold both servos where they
   are, confirmed by reading them back, before the goal ends.
 - ``joint_states``: lens_yaw, lens_pitch [rad] at ``joint_state_rate``; a channel that sends
   no pulses (a factory Maestro's start-up state: the servo is limp and its angle unknown) is
@@ -91,7 +93,17 @@ class ServoDriverNode(DeviceActionNode):
         channels = [c.channel for c, _, _ in self.axes.values()]
         if len(set(channels)) != len(channels):
             raise ValueError(f'yaw and pitch need different channels, got {channels}')
+        self.escape_limits = (
+            proto.speed_units(declare(
+                self, 'escape_speed_us_per_s', 4000.0,
+                'Pulse-width speed of an escape move [us/s] (0 = unlimited): about a '
+                "standard servo's own no-load speed (0.16 s per 60 deg).", 0.0, 400000.0)),
+            proto.acceleration_units(declare(
+                self, 'escape_acceleration_us_per_s2', 0.0,
+                'Pulse-width acceleration of an escape move [us/s^2] (0 = unlimited: the '
+                "servo's torque limits it).", 0.0, 80000.0)))
         self.device_limits_qus = {}     # axis -> (low, high) the Maestro was seen to clamp to
+        self._limits_sent = {}          # axis -> (speed, acceleration) units last sent
         self.start_device()
 
     def _positions_qus(self):
@@ -125,9 +137,8 @@ class ServoDriverNode(DeviceActionNode):
         self.client.get_errors()          # the device answers (and stale errors go)
         _, done = self.stop_device()
         self.get_logger().info(f'on connect: {done}')
-        for axis, (calibration, speed, acceleration) in self.axes.items():
-            self.client.set_speed(calibration.channel, speed)
-            self.client.set_acceleration(calibration.channel, acceleration)
+        self._limits_sent.clear()
+        self._send_limits(escape=False)
         for axis, position in self._positions_qus().items():
             calibration = self.axes[axis][0]
             if position == 0:
@@ -144,6 +155,15 @@ class ServoDriverNode(DeviceActionNode):
             else:
                 self.setup_notes.pop(axis, None)
 
+    def _send_limits(self, escape):
+        """Set each channel's speed and acceleration for a move (unless already set)."""
+        for axis, (calibration, speed, acceleration) in self.axes.items():
+            limits = self.escape_limits if escape else (speed, acceleration)
+            if self._limits_sent.get(axis) != limits:
+                self.client.set_speed(calibration.channel, limits[0])
+                self.client.set_acceleration(calibration.channel, limits[1])
+                self._limits_sent[axis] = limits
+
     def read_joints(self):
         """Return the names and angles [rad] of the servos whose position is known."""
         angles = self._angles(self._positions_qus())
@@ -158,7 +178,7 @@ class ServoDriverNode(DeviceActionNode):
         return errors
 
     def plan_move(self, goal):
-        """Return each axis's target [quarter-us]; refuse angles out of range, naming why."""
+        """Return (each axis's target [quarter-us], escape); refuse out-of-range angles."""
         plan = {}
         for axis in AXES:
             calibration = self.axes[axis][0]
@@ -173,13 +193,15 @@ class ServoDriverNode(DeviceActionNode):
                     f'beyond the {low / 4.0:.1f}..{high / 4.0:.1f} us the Maestro allows on '
                     f'channel {calibration.channel} ({self.setup_notes.get(axis, "")})')
             plan[axis] = target
-        return plan
+        return plan, bool(goal.escape)
 
     def start_move(self, plan):
-        """Set both targets."""
-        for axis, target in plan.items():
+        """Set the move's speed and acceleration limits, then both targets."""
+        targets, escape = plan
+        self._send_limits(escape)
+        for axis, target in targets.items():
             self.client.set_target(self.axes[axis][0].channel, target)
-        return plan
+        return targets
 
     def poll_move(self, move):
         """

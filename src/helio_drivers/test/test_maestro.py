@@ -89,6 +89,8 @@ def test_emulated_servo_ramps_under_speed_and_acceleration(maestro):
     # the device clamps targets to the channel range (2500 us)
     port.write(proto.set_speed(1, 0) + proto.set_acceleration(1, 0) + proto.set_target(1, 12000))
     assert proto.decode_u16(query(port, proto.get_position(1), 2)) == 10000
+    # the limits as the device holds them: Set Speed/Acceleration units, 0 = unlimited
+    assert emulator.motion_limits()[:2] == [(2500.0, 3125.0), (math.inf, math.inf)]
 
 
 def test_protocol_errors_are_reported_and_cleared(maestro):

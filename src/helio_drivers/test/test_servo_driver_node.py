@@ -94,6 +94,19 @@ def test_wrist_moves_to_calibrated_angles(wrist):
     assert graph.wait_status(lambda s: s.connected and s.device == 'servo')
 
 
+def test_an_escape_goal_lifts_the_per_axis_limits_for_its_move_only(wrist):
+    emulator, graph = wrist
+    configured = [(4000.0, 40000.0), (1000.0, 40000.0)]        # wrist_parameters: yaw, pitch
+    assert [emulator.motion_limits()[c] for c in (0, 3)] == configured
+    response = graph.run(MoveWrist.Goal(yaw=0.1, pitch=1.2, escape=True))
+    assert response.result.success, response.result.message
+    # the escape defaults (4000 us/s, unlimited acceleration) on both channels
+    assert [emulator.motion_limits()[c] for c in (0, 3)] == [(4000.0, math.inf)] * 2
+    assert response.result.achieved_pitch == pytest.approx(1.2, abs=1e-3)
+    assert graph.run(MoveWrist.Goal(yaw=0.0, pitch=0.0)).result.success
+    assert [emulator.motion_limits()[c] for c in (0, 3)] == configured
+
+
 def test_out_of_range_angle_is_refused_naming_the_joint(wrist):
     emulator, graph = wrist
     response = graph.run(MoveWrist.Goal(yaw=2.0, pitch=0.0))
