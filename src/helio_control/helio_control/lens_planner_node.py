@@ -145,7 +145,13 @@ class LensPlannerNode(Node):
             '(wall clock) [s].', 0.1, 600.0)
         self.joint_state_max_age = declare(
             self, 'joint_state_max_age', 5.0,
-            'The present joints must be younger than this (node clock) [s].', 0.01, 60.0)
+            'The present joints must be younger than this (node clock) [s], unless their '
+            'message came within joint_state_max_wall_age.', 0.01, 60.0)
+        self.joint_state_max_wall_age = declare(
+            self, 'joint_state_max_wall_age', 1.0,
+            'Joints older than joint_state_max_age are still present while their driver was '
+            'heard within this much wall time [s]: the drivers publish at a wall-clock rate, '
+            'beside a simulated world that may run far faster.', 0.01, 60.0)
         self.joint_state_tolerance = declare(
             self, 'joint_state_tolerance', 0.3,
             'Largest gap between an image stamp and the joint state used with it (node '
@@ -257,7 +263,7 @@ class LensPlannerNode(Node):
         self.world_calibrated = True
 
     def _on_joint_state(self, message):
-        problem = self.joints.add_message(message)
+        problem = self.joints.add_message(message, received=time.monotonic())
         if problem:
             self.get_logger().warning(problem, throttle_duration_sec=5.0)
 
@@ -366,7 +372,8 @@ class LensPlannerNode(Node):
         return point_to_array(self.sun.direction)
 
     def _present_joints(self):
-        lookup = self.joints.latest(self._now(), self.joint_state_max_age)
+        lookup = self.joints.latest(self._now(), self.joint_state_max_age, time.monotonic(),
+                                    self.joint_state_max_wall_age)
         if not lookup:
             raise GoalFailed(f'the present joints are unknown: {lookup.reason}')
         return lookup.positions

@@ -156,6 +156,33 @@ def test_latest_is_refused_when_a_driver_went_quiet():
     assert buffer.latest(now=3.1, max_age=0.5).positions[3:].tolist() == [0.0, 0.0]
 
 
+def test_latest_forgives_an_old_stamp_while_the_driver_is_heard_on_the_wall_clock():
+    # a world 20x faster than real time: the wrist driver's last message, 0.3 s of wall time
+    # ago, is 6 s old on the simulated clock; the arm's came 2 s of wall time ago
+    buffer = JointStateBuffer()
+    buffer.add(100.0, WRIST, [0.1, 0.2], received=50.0)
+    buffer.add(105.5, ARM, [0.0] * 4, received=48.3)
+    fresh = buffer.latest(now=106.0, max_age=5.0, wall_now=50.3, max_wall_age=1.0)
+    assert fresh and fresh.positions[3:].tolist() == [0.1, 0.2]
+    assert fresh.gap == pytest.approx(6.0)
+    # silent on both clocks: stale, saying both ages
+    lookup = buffer.latest(now=106.0, max_age=5.0, wall_now=51.5, max_wall_age=1.0)
+    assert not lookup
+    assert lookup.reason == ('lens_yaw last received 6.000 s ago (limit 5 s) and 1.500 s of '
+                             'wall time ago (limit 1 s)')
+    # young on the stamps' clock: fresh whatever the wall clock says (a paused world)
+    assert buffer.latest(now=104.0, max_age=5.0, wall_now=60.0, max_wall_age=1.0)
+    # without receipt times or a wall limit: the stamps' clock alone
+    assert not buffer.latest(now=106.0, max_age=5.0, wall_now=50.3)
+    assert not buffer.latest(now=106.0, max_age=5.0)
+    untimed = JointStateBuffer()
+    feed_drivers(untimed, [100.0], [100.0])
+    assert not untimed.latest(now=106.0, max_age=5.0, wall_now=50.3, max_wall_age=1.0)
+    buffer.clear()
+    buffer.add(100.0, JOINT_NAMES, [0.0] * 5)            # receipts forgotten with the samples
+    assert not buffer.latest(now=106.0, max_age=5.0, wall_now=50.3, max_wall_age=1.0)
+
+
 def test_non_finite_positions_are_skipped_and_said():
     buffer = JointStateBuffer()
     problem = buffer.add(1.0, ('dobot_j1', 'lens_yaw'), [math.nan, 0.2])

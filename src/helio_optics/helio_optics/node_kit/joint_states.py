@@ -7,7 +7,12 @@ stamped on its own node clock (simulated time under ``use_sim_time``). ``JointSt
 merges the parts by joint name and keeps a short stamped history per joint, so a node can ask
 for "the joints at the stamp of this image" (``at``) or "the latest joints, if fresh"
 (``latest``). All times are the stamps' own clock, never the wall clock of the process that
-buffers them: a node passes its clock's ``now`` for staleness.
+buffers them: a node passes its clock's ``now`` for staleness. The one exception is the
+optional receipt time ``add`` takes (a wall clock the caller reads): the drivers publish at a
+rate of wall time, so beside a simulated world far faster than real time a driver that is
+alive can leave seconds of simulated time between two messages; ``latest`` then calls a joint
+stale only when it is old on both clocks, as the lens planner's focus lease judges its
+heartbeat.
 
 No rclpy import: nodes feed it messages, tests feed it numbers.
 """
@@ -63,19 +68,22 @@ class JointStateBuffer:
         self.restart_jump = float(restart_jump)
         self._stamps = {name: [] for name in self.names}
         self._values = {name: [] for name in self.names}
+        self._received = {}           # name -> receipt time of its newest message (wall) [s]
 
     def clear(self):
         """Forget every sample."""
         for name in self.names:
             self._stamps[name].clear()
             self._values[name].clear()
+        self._received.clear()
 
-    def add(self, stamp, names, positions):
+    def add(self, stamp, names, positions, received=None):
         """
-        Take one (possibly partial) joint state at `stamp` [s].
+        Take one (possibly partial) joint state at `stamp` [s], received at `received`.
 
         Joints not in the buffer's names are ignored; a name without a position or with a
-        non-finite one is skipped. Return what was skipped, as a sentence ('' when nothing).
+        non-finite one is skipped. `received` is the wall-clock time the message came [s]
+        (None: not tracked). Return what was skipped, as a sentence ('' when nothing).
         """
         stamp = float(stamp)
         if not math.isfinite(stamp):
@@ -94,12 +102,15 @@ class JointStateBuffer:
             if stamps and stamp < stamps[-1] - self.restart_jump:
                 self.clear()     # the clock went back: a restarted simulation
             self._insert(name, stamp, value)
+            if received is not None:
+                self._received[name] = float(received)
         return ('joint state partly skipped: ' + ', '.join(problems)) if problems else ''
 
-    def add_message(self, message):
+    def add_message(self, message, received=None):
         """Take a sensor_msgs/JointState (stamped in its header); return what was skipped."""
         stamp = message.header.stamp
-        return self.add(stamp.sec + stamp.nanosec * 1e-9, message.name, message.position)
+        return self.add(stamp.sec + stamp.nanosec * 1e-9, message.name, message.position,
+                        received)
 
     def _insert(self, name, stamp, value):
         stamps, values = self._stamps[name], self._values[name]
@@ -236,11 +247,15 @@ class JointStateBuffer:
             near = stamp - stamps[before] <= rest_hold
         return values[before] if still and near else None
 
-    def latest(self, now, max_age=0.0):
+    def latest(self, now, max_age=0.0, wall_now=None, max_wall_age=0.0):
         """
         Return every joint's newest value (JointLookup), if none is older than `max_age`.
 
-        Ages count from `now` [s] on the stamps' clock; `max_age` 0 accepts any age.
+        Ages count from `now` [s] on the stamps' clock; `max_age` 0 accepts any age. With
+        `wall_now` and `max_wall_age` (> 0) a joint older than `max_age` is still fresh while
+        its newest message was received at most `max_wall_age` [s] of wall time before
+        `wall_now` (see the module docstring); a joint with no receipt time is judged on the
+        stamps' clock alone.
         """
         positions, worst = [], 0.0
         for name in self.names:
@@ -249,8 +264,14 @@ class JointStateBuffer:
                 return JointLookup(reason=f'no {name} received yet')
             age = float(now) - stamps[-1]
             if max_age > 0.0 and age > max_age:
-                return JointLookup(reason=f'{name} last received {age:.3f} s ago (limit '
-                                          f'{max_age:g} s)', gap=age)
+                reason = f'{name} last received {age:.3f} s ago (limit {max_age:g} s)'
+                received = self._received.get(name)
+                if wall_now is None or received is None or not max_wall_age > 0.0:
+                    return JointLookup(reason=reason, gap=age)
+                wall_age = float(wall_now) - received
+                if wall_age > max_wall_age:
+                    return JointLookup(reason=f'{reason} and {wall_age:.3f} s of wall time '
+                                              f'ago (limit {max_wall_age:g} s)', gap=age)
             positions.append(self._values[name][-1])
             worst = max(worst, age)
         return JointLookup(positions=np.array(positions), gap=worst)
