@@ -65,6 +65,11 @@ def focus_point(rig, x, sun_robot, T_robot_world):
     return transform_points(invert_transform(T_robot_world), hit), distance
 
 
+def safe_to_travel_at(distance, heating_distance, safe_margin):
+    """Return whether the focus may move sideways at `distance` (>= `safe_margin` from heating)."""
+    return abs(distance - heating_distance) >= safe_margin - 1e-9
+
+
 def plan_focus_moves(targeting, x_now, target_world, d_lp, sun_robot, T_robot_world,
                      heating_distance, travel_distances, safe_margin=0.015, same_point=1e-3):
     """
@@ -87,7 +92,7 @@ def plan_focus_moves(targeting, x_now, target_world, d_lp, sun_robot, T_robot_wo
         return [Leg('direct', goal.lens.x, d_lp, target)]
 
     def safe(distance):
-        return abs(distance - heating_distance) >= safe_margin - 1e-9
+        return safe_to_travel_at(distance, heating_distance, safe_margin)
     travel = [d for d in travel_distances if safe(d)]
     if not travel:
         raise MovePlanningError(f'no travel distance in {list(travel_distances)} lies '

@@ -473,8 +473,8 @@ class LensPlannerNode(Node):
         if not (math.isfinite(d_lp) and d_lp > 0.0):
             raise GoalFailed(f'd_lp must be a finite distance > 0 m, got {goal.d_lp}')
         travel = goal.travel_d_lp if goal.travel_d_lp != 0.0 else self.travel_distance
-        if not (math.isfinite(travel) and abs(travel - self.heating_distance)
-                >= self.safe_margin - 1e-9):
+        if not (math.isfinite(travel) and lens_moves.safe_to_travel_at(
+                travel, self.heating_distance, self.safe_margin)):
             raise GoalFailed(f'travel_d_lp {goal.travel_d_lp} m: the focus may move sideways '
                              f'only {self.safe_margin * 100:.1f} cm or more from the heating '
                              f'distance {self.heating_distance * 100:.1f} cm (safe_margin)')
@@ -492,7 +492,8 @@ class LensPlannerNode(Node):
                 - self.rig.forward(reached).T_robot_lens[:3, 3]))
             goal_handle.publish_feedback(feedback)
             reached = await self._move(goal_handle, leg.x)
-        self.lease.placed(abs(d_lp - self.heating_distance) < self.safe_margin, alive)
+        self.lease.placed(not lens_moves.safe_to_travel_at(d_lp, self.heating_distance,
+                                                           self.safe_margin), alive)
         commanded = self.rig.forward(legs[-1].x).T_robot_lens[:3, 3]
         achieved = self.rig.forward(reached).T_robot_lens[:3, 3]
         result.achieved = self._lens_pose(reached, d_lp)

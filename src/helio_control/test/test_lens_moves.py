@@ -2,7 +2,8 @@
 
 import math
 
-from helio_control.lens_moves import focus_point, MovePlanningError, plan_focus_moves
+from helio_control.lens_moves import (
+    focus_point, MovePlanningError, plan_focus_moves, safe_to_travel_at)
 from helio_optics.focus_targeting import FocusTargeting
 from helio_optics.geometry import direction_from_angles
 from helio_optics.lens import LensParameters
@@ -84,3 +85,14 @@ def test_where_the_paper_retreat_is_out_of_reach_a_nearer_safe_distance_is_taken
     # and a travel distance too near the heating distance is not taken at all
     with pytest.raises(MovePlanningError, match='no travel distance'):
         plan_focus_moves(targeting, x_now, (0.08, 0.07), HEAT, SUN, T, HEAT, (HEAT + 0.005,))
+
+
+def test_the_focus_may_travel_at_the_safe_margin_or_beyond_on_either_side():
+    heating, margin = 0.082, 0.015
+    # exactly the margin away is safe, whatever the last bit of the difference
+    assert safe_to_travel_at(heating + margin, heating, margin * (1.0 + 1e-12))
+    assert safe_to_travel_at(heating + margin, heating, margin)
+    assert safe_to_travel_at(heating - margin, heating, margin)
+    assert safe_to_travel_at(0.112, heating, margin)        # the paper's 3 cm
+    assert not safe_to_travel_at(heating + 0.0149, heating, margin)
+    assert not safe_to_travel_at(heating, heating, margin)
