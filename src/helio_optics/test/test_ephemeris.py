@@ -4,7 +4,7 @@ import datetime
 import math
 
 from helio_optics.ephemeris import corrected_angles, corrected_direction, ray_angles_from_sun
-from helio_optics.ephemeris import Site, sun_position
+from helio_optics.ephemeris import Site, sun_position, SunPath
 from helio_optics.geometry import direction_from_angles
 import numpy as np
 import pytest
@@ -68,3 +68,52 @@ def test_angle_offsets_are_eq18_differences_wrapped_across_north():
     direct = ray_angles_from_sun(after, heading)
     np.testing.assert_allclose(direction_from_angles(phi0 + dphi, theta0 + dtheta),
                                direction_from_angles(*direct), atol=1e-12)
+
+
+def _unit(position):
+    cos_e = math.cos(position.elevation)
+    return np.array([cos_e * math.sin(position.azimuth), cos_e * math.cos(position.azimuth),
+                     math.sin(position.elevation)])
+
+
+@pytest.mark.parametrize('site', [SPA_SITE, Site(-33.9, 151.2), Site(1.3, 103.8),
+                                  Site(69.6, 18.9)], ids=['golden', 'sydney', 'equator',
+                                                          'arctic'])
+def test_sun_path_is_pysolar_within_1e7_rad_while_the_sun_is_up(site):
+    """The interpolated path against pysolar itself at random instants over two days."""
+    path = SunPath(site)
+    rng = np.random.default_rng(7)
+    start = datetime.datetime(2026, 6, 21, tzinfo=datetime.timezone.utc)
+    errors, near_horizon = [], []
+    for seconds in rng.uniform(0.0, 2 * 86400.0, 300):
+        when = start + datetime.timedelta(seconds=float(seconds))
+        exact = sun_position(site, when)
+        gap = math.acos(min(1.0, float(_unit(exact) @ _unit(path.position(when)))))
+        if exact.elevation > math.radians(2.0):
+            errors.append(gap)
+        elif exact.elevation > 0.0:
+            near_horizon.append(gap)
+    assert len(errors) > 50
+    assert max(errors) < 1e-7
+    assert max(near_horizon, default=0.0) < 1e-3       # refraction bends fast there
+    # a knot per minute, each traced once: not a pysolar call per position
+    assert path.exact_calls < 300 * 4
+
+
+def test_sun_path_follows_a_clock_stepping_forward_with_four_calls_per_knot_at_most():
+    path = SunPath(SPA_SITE, knot_spacing=60.0)
+    for step in range(6000):     # ten minutes in 0.1 s steps
+        position = path.position(SPA_TIME + datetime.timedelta(seconds=0.1 * step))
+    assert path.exact_calls <= 10 + 4
+    exact = sun_position(SPA_SITE, SPA_TIME + datetime.timedelta(seconds=599.9))
+    assert position.elevation == pytest.approx(exact.elevation, abs=1e-7)
+    assert position.azimuth == pytest.approx(exact.azimuth, abs=1e-7)
+
+
+def test_sun_path_rejects_naive_times_and_bad_spacings():
+    with pytest.raises(ValueError, match='naive datetime'):
+        SunPath(SPA_SITE).position(datetime.datetime(2003, 10, 17, 12, 30, 30))
+    with pytest.raises(ValueError, match='knot_spacing'):
+        SunPath(SPA_SITE, knot_spacing=0.0)
+    with pytest.raises(TypeError, match='Site'):
+        SunPath((39.7, -105.2))
