@@ -14,7 +14,8 @@ timezone-aware ``datetime`` (a naive one raises ``ValueError``: the hour would b
 ``SunPath(site, knot_spacing=60.0)``: the same positions, interpolated (a cubic through four
 exact ones a ``knot_spacing`` apart, kept): ``SunPath.position(when)`` costs microseconds
 instead of pysolar's milliseconds, within 1e-7 rad of ``sun_position`` while the sun is 2 deg
-or more above the horizon (1e-3 rad below that, where refraction bends fast; tested). The simulated world asks for the sun every step; this is what it uses.
+or more above the horizon (1e-3 rad below that, where refraction bends fast; tested). The
+simulated world asks for the sun every step; this is what it uses.
 
 ``corrected_angles(phi0, theta0, anchor, now) -> (phi0_t, theta0_t)``: Eq 18,
 theta_hat_t = theta_hat + (theta_c^t - theta_c^t0), for the ray angles of Eq 2 (s0 points
