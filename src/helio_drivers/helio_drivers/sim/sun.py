@@ -3,9 +3,9 @@ The simulated sun and clouds (issue 6, item 1).
 
 Position: ``helio_optics.ephemeris`` (pysolar; the one implementation the estimator uses for
 Eq 18 too) for a site and the simulated instant, through its ``SunPath`` (exact positions a
-minute apart, interpolated: microseconds a call instead of a millisecond, within 1e-7 rad); the robot's heading (compass azimuth of its
-x axis, clockwise from north) is a hidden parameter of the world: the estimator must find it
-from the light spot, nothing publishes it. The sun ray s0 (the way light travels, paper
+minute apart, interpolated: microseconds a call instead of a millisecond, within 1e-7 rad);
+the robot's heading (compass azimuth of its x axis, clockwise from north) is a hidden
+parameter of the world: the estimator must find it from the light spot, nothing publishes it. The sun ray s0 (the way light travels, paper
 Eq 2) in the robot frame comes from ``ephemeris.ray_angles_from_sun``; the world frame's
 orientation relative to the robot is the rig's ``T_robot_world``.
 
