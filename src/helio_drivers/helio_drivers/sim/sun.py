@@ -5,9 +5,10 @@ Position: ``helio_optics.ephemeris`` (pysolar; the one implementation the estima
 Eq 18 too) for a site and the simulated instant, through its ``SunPath`` (exact positions a
 minute apart, interpolated: microseconds a call instead of a millisecond, within 1e-7 rad);
 the robot's heading (compass azimuth of its x axis, clockwise from north) is a hidden
-parameter of the world: the estimator must find it from the light spot, nothing publishes it. The sun ray s0 (the way light travels, paper
-Eq 2) in the robot frame comes from ``ephemeris.ray_angles_from_sun``; the world frame's
-orientation relative to the robot is the rig's ``T_robot_world``.
+parameter of the world: the estimator must find it from the light spot, nothing publishes it.
+The sun ray s0 (the way light travels, paper Eq 2) in the robot frame comes from
+``ephemeris.ray_angles_from_sun``; the world frame's orientation relative to the robot is the
+rig's ``T_robot_world``.
 
 Irradiance: the direct normal irradiance (DNI) times the cloud attenuation, a factor in
 [0, 1] (1 clear). Clouds are a schedule of intervals [start, end) of simulated seconds
