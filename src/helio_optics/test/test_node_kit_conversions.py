@@ -7,9 +7,10 @@ from helio_optics.geometry import homogeneous, PinholeCamera, rotation_y, rotati
 from helio_optics.node_kit.conversions import (
     array_to_point, camera_from_info, camera_info_from_camera, ENCODINGS, image_to_numpy,
     ImageConversionError, matrix_to_pose, numpy_to_image, point_to_array, pose_to_matrix,
-    stamp_from_seconds, stamp_to_nanoseconds, stamp_to_seconds)
+    serialized_image, stamp_from_seconds, stamp_to_nanoseconds, stamp_to_seconds)
 import numpy as np
 import pytest
+from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import Image
 
 
@@ -156,3 +157,40 @@ def test_pose_round_trip_matches_the_rotation_and_translation():
     assert norm == pytest.approx(1.0)
     assert np.allclose(pose_to_matrix(pose), transform, atol=1e-12)
     assert np.allclose(point_to_array(array_to_point([1.0, 2.0, 3.0])), [1.0, 2.0, 3.0])
+
+
+@pytest.mark.parametrize('encoding', sorted(ENCODINGS))
+@pytest.mark.parametrize('frame_id', ['', 'r', 'rgb', 'thermal', 'camera_optical_frame'])
+@pytest.mark.parametrize('big_endian, padding', [(False, 0), (True, 2), (False, 5)])
+def test_serialized_image_is_what_rclpy_serializes(encoding, frame_id, big_endian, padding):
+    """The hand-written CDR against rclpy's serializer, every alignment of the strings."""
+    array = random_array(encoding, height=4, width=3)
+    row_bytes = array.nbytes // 4
+    stamp = stamp_from_seconds(1234.000056789)
+    message = numpy_to_image(array, encoding, is_bigendian=big_endian,
+                             step=row_bytes + padding)
+    message.header.stamp, message.header.frame_id = stamp, frame_id
+    data = serialized_image(array, encoding, stamp, frame_id, is_bigendian=big_endian,
+                            step=row_bytes + padding)
+    expected = serialize_message(message)
+    assert len(data) == len(expected)
+    # CDR aligns each 4-byte field to 4 bytes from the end of the 4-byte encapsulation
+    # header; the alignment gaps hold no data (Fast CDR leaves whatever was in its buffer)
+    offset = 8 + 4 + len(frame_id) + 1        # past the stamp and the frame_id string
+    gaps = [(offset, offset + -offset % 4)]   # height (uint32) is aligned
+    offset += -offset % 4 + 8 + 4 + len(encoding) + 1 + 1   # encoding string, is_bigendian
+    gaps.append((offset, offset + -offset % 4))             # step (uint32) is aligned
+    masked = [bytearray(data), bytearray(expected)]
+    for start, end in gaps:
+        for buffer in masked:
+            buffer[4 + start:4 + end] = bytes(end - start)
+    assert masked[0] == masked[1]
+    assert all(data[4 + start:4 + end] == bytes(end - start) for start, end in gaps)
+    back = deserialize_message(data, Image)
+    assert back.header.frame_id == frame_id and back.header.stamp == stamp
+    assert np.array_equal(image_to_numpy(back), array)
+
+
+def test_serialized_image_refuses_what_numpy_to_image_refuses():
+    with pytest.raises(ImageConversionError, match='rgb8 needs dtype uint8'):
+        serialized_image(np.zeros((2, 2, 3), np.uint16), 'rgb8', stamp_from_seconds(1.0))

@@ -28,6 +28,7 @@ point its centre ray meets, plus Gaussian noise (NETD), read out capped at 180.9
 
 from dataclasses import dataclass
 import math
+import threading
 
 import cv2
 from helio_drivers.sim.kernels import (bin_on_raster, noisy_read_out, thermal_counts,
@@ -291,16 +292,71 @@ class NoisyReadOut:
                             gain.reshape(-1), self._index)
         return level, gain
 
-    def expose(self, prepared, rng=None):
-        """Return the 8-bit frame of (level, gain): noise from a random offset in the bank."""
-        level, gain = (np.ascontiguousarray(part) for part in prepared)
+    def draw(self, rng=None):
+        """Return the noise of one frame: (bank frame, offset) drawn from `rng`."""
         rng = np.random.default_rng() if rng is None else rng
-        k, offset = (int(v) for v in rng.integers(0, (self.FRAMES, self._slack + 1)))
+        return tuple(int(v) for v in rng.integers(0, (self.FRAMES, self._slack + 1)))
+
+    def expose(self, prepared, rng=None, drawn=None):
+        """
+        Return the 8-bit frame of (level, gain): noise from a random offset in the bank.
+
+        `drawn`: the frame's noise from ``draw`` (drawn earlier, on the thread that owns
+        `rng`); None draws it from `rng` now.
+        """
+        level, gain = (np.ascontiguousarray(part) for part in prepared)
+        k, offset = self.draw(rng) if drawn is None else drawn
         noise = self._bank[k, offset:offset + level.size]
         image = np.empty(level.shape, np.uint8)
         noisy_read_out(level.reshape(-1), gain.reshape(-1), noise, image.reshape(-1))
         quality = self._webcam.settings.jpeg_quality
         return jpeg_round_trip(image, quality) if quality > 0 else image
+
+
+class DevelopingFrame:
+    """
+    A staged RGB frame (``RgbCamera.stage``): call it, once or more, on any thread, for its image.
+
+    The first caller develops it; a caller meanwhile waits for that one. An error while
+    developing is raised to every caller.
+    """
+
+    def __init__(self, develop):
+        """Hold `develop` (no arguments -> the image) until the first call."""
+        self._develop = develop
+        self._claim = threading.Lock()
+        self._done = threading.Event()
+        self._image = None
+        self._error = None
+
+    @classmethod
+    def developed(cls, image):
+        """Return a frame developed already, holding `image`."""
+        frame = cls(None)
+        frame._claim.acquire()
+        frame._image = image
+        frame._done.set()
+        return frame
+
+    def __call__(self):
+        """Return the image (H, W, 3) uint8, developing it if no thread has begun to."""
+        self.wait_or_develop()
+        if self._error is not None:
+            raise self._error
+        return self._image
+
+    def wait_or_develop(self):
+        """Develop the frame here, or wait until the thread that began it has finished."""
+        if self._claim.acquire(blocking=False):
+            try:
+                self._image = self._develop()
+            except Exception as error:     # raised to each caller of the frame
+                self._error = error
+            finally:
+                self._develop = None
+                self._done.set()
+        else:
+            self._done.wait()
 
 
 class RgbCamera:
@@ -346,6 +402,7 @@ class RgbCamera:
             self._index_scale = np.ascontiguousarray(np.broadcast_to(
                 vignette * np.float32(self._read_out.index_scale()), (s.height, s.width, 3)))
         self.renders = {'frames': 0, 'whole': 0, 'parts': 0, 'light': 0}
+        self._developing = None     # the DevelopingFrame staged last, until it is developed
 
     def update_char(self, char, box=None):
         """
@@ -356,6 +413,7 @@ class RgbCamera:
         """
         if box is None:
             return
+        self._finish_developing()
         r0, r1, c0, c1 = box
         height = self._wood.shape[0]
         chi = np.flipud(char[r0:r1, c0:c1]).astype(np.float32)[:, :, None]
@@ -392,9 +450,29 @@ class RgbCamera:
         light through the optics with its noise-free sensor stage at the present pose,
         redone over the image region of the texture's changes (all of it after a move or
         a cloud): an unchanged scene costs the noise and the read-out.
+
+        The same as ``stage(...)()``: staging and developing on one thread.
         """
+        return self.stage(T_world_camera, light, attenuation, rng)()
+
+    def stage(self, T_world_camera, light=None, attenuation=1.0, rng=None):
+        """
+        Take a frame's scene now; return its ``DevelopingFrame`` (call it for the image).
+
+        Staging is the cheap part, on the thread that owns the world: the char (from
+        ``update_char``), the light window and the clouds go into the lit texture, the pose
+        is kept and the frame's noise drawn from `rng`. Developing is the rest (the optics,
+        the sensor stage, the read-out: 90 % of a moving camera's frame) and reads only
+        what staging left in this camera, so it may run on another thread while the world
+        steps on; the next ``stage`` (or ``update_char``) waits for it, or does it if no
+        thread has begun it. The image is the one ``render`` gives for the same calls.
+        Without the linearised read-out (a Bayer mosaic or the exact read-out draw their
+        noise as they go) the frame is developed here, before ``stage`` returns.
+        """
+        self._finish_developing()
         self.renders['frames'] += 1
         pose = np.asarray(T_world_camera, dtype=np.float64).tobytes()
+        T_world_camera = np.array(T_world_camera, dtype=np.float64)
         attenuation = float(attenuation)
         whole = pose != self._pose or self._prepared is None
         if attenuation != self._attenuation:
@@ -402,20 +480,39 @@ class RgbCamera:
             whole = True
         if light is not self._light_source:
             self._set_window(light)
+        rects = []
         if whole:
             self.renders['whole'] += 1
-            self._prepared = self._sensor_stage(self._blur(self._radiance(
-                T_world_camera, self._lit)), (0, 0, self.camera.width, self.camera.height))
             self._pose = pose
         else:
             for box in _merged_boxes(self._dirty):
                 rect = self._image_rect(T_world_camera, self._raster_box_world(*box))
                 if rect is not None:
                     self.renders['parts'] += 1
-                    self._redo(T_world_camera, *rect)
+                    rects.append(rect)
         self._dirty = []
+        if self._read_out is None:
+            return DevelopingFrame.developed(self._develop(T_world_camera, whole, rects, rng))
+        drawn = self._read_out.draw(rng)
+        self._developing = DevelopingFrame(
+            lambda: self._develop(T_world_camera, whole, rects, drawn=drawn))
+        return self._developing
+
+    def _finish_developing(self):
+        """Wait for the frame staged last to be developed (develop it here if nobody has)."""
+        if self._developing is not None:
+            frame, self._developing = self._developing, None
+            frame.wait_or_develop()
+
+    def _develop(self, T_world_camera, whole, rects, rng=None, drawn=None):
+        """Make the staged frame: its light, the sensor stage where needed, the read-out."""
+        if whole:
+            self._prepared = self._sensor_stage(self._blur(self._radiance(
+                T_world_camera, self._lit)), (0, 0, self.camera.width, self.camera.height))
+        for rect in rects:
+            self._redo(T_world_camera, *rect)
         if self._read_out is not None:
-            return self._read_out.expose(self._prepared, rng)
+            return self._read_out.expose(self._prepared, rng, drawn)
         return self._webcam.expose(self._prepared, rng)
 
     def panel_light(self, light, attenuation=1.0):

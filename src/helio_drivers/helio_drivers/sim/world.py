@@ -336,6 +336,15 @@ class SimWorld:
 
     def rgb_image(self):
         """Return the RGB image (H, W, 3) uint8 at the camera's present pose."""
+        return self.stage_rgb_frame()()
+
+    def stage_rgb_frame(self):
+        """
+        Take the RGB camera's frame now; return it to develop (``cameras.DevelopingFrame``).
+
+        Call the returned frame for the image, here or on another thread while the world
+        steps on (``RgbCamera.stage``): the image is the one ``rgb_image`` gives now.
+        """
         T_world_rgb, _ = self.camera_poses()
         field = self._field
         if self.flux.fields != self._light_key:  # the lit window changes only with a new field
@@ -346,7 +355,7 @@ class SimWorld:
             self._light_key = self.flux.fields
         self.rgb.update_char(self.panel.char, self.panel.take_char_changes())
         attenuation = self._dni / max(self.sun.dni, 1e-9)   # clouds dim the direct sun only
-        return self.rgb.render(T_world_rgb, self._light, attenuation, self._rng)
+        return self.rgb.stage(T_world_rgb, self._light, attenuation, self._rng)
 
     def _light_window(self, field):
         """Return the panel box holding the lens shadow and the focused spot."""

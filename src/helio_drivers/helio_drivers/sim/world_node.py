@@ -11,7 +11,9 @@ and publishes:
 - ``rgb/image_raw`` (rgb8) and ``rgb/camera_info`` at ``rgb_rate`` of simulated time;
   ``thermal/image_raw`` (16UC1 centikelvin) and ``thermal/camera_info`` at
   ``thermal_rate`` (sensor-data QoS); each image is rendered only while someone
-  subscribes to it (the camera_info always goes out);
+  subscribes to it (the camera_info always goes out); an RGB frame's scene is taken at its
+  stamp and the frame developed on a thread of its own (``rgb_thread``) while the world
+  steps on, published before the next one is taken;
 - ``sim/canvas`` (mono8 top view of the char map, 255 bare wood) at ``canvas_rate``;
 - the world's ground truth for tests and recordings, under ``sim/truth/`` (reliable,
   transient local, every ``truth_period``): ``sun_direction`` (geometry_msgs/Vector3Stamped,
@@ -50,6 +52,7 @@ At shutdown it writes ``canvas.png`` (the burnt panel as a person sees it),
 ``canvas_mask.png`` (the char map) and ``dots.csv`` into ``output_dir`` (if set).
 """
 
+import concurrent.futures
 import threading
 import time
 
@@ -60,7 +63,8 @@ from helio_drivers.sim.warm_up import warm_up
 from helio_drivers.sim.world import flat_settings, settings_from_flat, SimSettings, SimWorld
 from helio_msgs.msg import LightTruth, ThermalStats
 from helio_optics.node_kit.conversions import array_to_point, camera_info_from_camera
-from helio_optics.node_kit.conversions import matrix_to_pose, numpy_to_image, stamp_to_seconds
+from helio_optics.node_kit.conversions import matrix_to_pose, numpy_to_image, serialized_image
+from helio_optics.node_kit.conversions import stamp_to_seconds
 from helio_optics.node_kit.deployment import rig_file_or_default, RIG_FILE_PARAMETER
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
@@ -287,6 +291,14 @@ class SimWorldNode(Node):
             self.create_subscription(
                 ThermalStats, lockstep_topic, self._on_lockstep,
                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        self._rgb_job = None
+        self._rgb_thread = concurrent.futures.ThreadPoolExecutor(
+            max_workers=1, thread_name_prefix='sim-rgb') if declare(
+            self, 'rgb_thread', True,
+            "Develop each RGB frame (its optics and read-out, most of a moving camera's "
+            'cost) on a thread of its own while the world steps on: the image goes out '
+            'within one frame period of simulated time after its stamp, never after the '
+            'next frame; false: on the stepping thread, before the next /clock') else None
         self._stop = threading.Event()
         self.achieved_real_time_factor = 0.0
         self.step_errors = 0
@@ -397,8 +409,7 @@ class SimWorldNode(Node):
             self._publish_frame(self.thermal_pub, self.world.thermal_image, '16UC1',
                                 self.thermal_info_pub, self._thermal_info, stamp)
         if self._due('rgb', self.rgb_rate):
-            self._publish_frame(self.rgb_pub, self.world.rgb_image, 'rgb8', self.rgb_info_pub,
-                                self._rgb_info, stamp)
+            self._publish_rgb(stamp)
             truth = PoseStamped()
             truth.header.stamp, truth.header.frame_id = stamp, 'world'
             truth.pose = matrix_to_pose(self.world.camera_poses()[0])
@@ -413,11 +424,47 @@ class SimWorldNode(Node):
     def _publish_frame(self, image_pub, render, encoding, info_pub, info, stamp):
         """Publish a camera's CameraInfo, and its image when someone subscribes to it."""
         if image_pub.get_subscription_count() > 0:
-            image = numpy_to_image(render(), encoding)
-            image.header.stamp, image.header.frame_id = stamp, info.header.frame_id
-            image_pub.publish(image)
+            self._send_frame(image_pub, render(), encoding, info_pub, info, stamp)
+        else:
+            info.header.stamp = stamp
+            info_pub.publish(info)
+
+    def _send_frame(self, image_pub, array, encoding, info_pub, info, stamp):
+        """Publish a camera's image `array` (serialised: no message object) and its CameraInfo."""
+        image_pub.publish(serialized_image(array, encoding, stamp, info.header.frame_id))
         info.header.stamp = stamp
         info_pub.publish(info)
+
+    def _publish_rgb(self, stamp):
+        """
+        Take the RGB frame now and publish it: developed on the RGB thread, or here.
+
+        With ``rgb_thread`` the frame's optics and read-out run beside the world's next
+        steps; the frame taken before goes out first (``_finish_rgb``), so an image is
+        published before the world passes the next frame's time.
+        """
+        self._finish_rgb()
+        if self._rgb_thread is None or self.rgb_pub.get_subscription_count() == 0:
+            self._publish_frame(self.rgb_pub, self.world.rgb_image, 'rgb8', self.rgb_info_pub,
+                                self._rgb_info, stamp)
+            return
+        frame = self.world.stage_rgb_frame()
+        self._rgb_job = self._rgb_thread.submit(
+            lambda: self._send_frame(self.rgb_pub, frame(), 'rgb8', self.rgb_info_pub,
+                                     self._rgb_info, stamp))
+
+    def _finish_rgb(self):
+        """Wait until the RGB frame on the RGB thread is published; log it if it failed."""
+        job, self._rgb_job = self._rgb_job, None
+        if job is None:
+            return
+        try:
+            job.result()
+        except Exception as error:  # keep simulating; a broken frame is logged
+            if self.context.ok():
+                self.step_errors += 1
+                self.get_logger().error(f'sim RGB frame failed: {error!r}',
+                                        throttle_duration_sec=5.0)
 
     def _publish_truth(self, stamp):
         """Publish the true sun ray (robot frame) and the true T_robot_world."""
@@ -449,6 +496,9 @@ class SimWorldNode(Node):
             return
         self._stop.set()
         self._thread.join(timeout=10.0)
+        self._finish_rgb()
+        if self._rgb_thread is not None:
+            self._rgb_thread.shutdown(wait=True)
         self.get_logger().info(
             f'stopped at {self.world.time:.1f} s simulated, real-time factor achieved '
             f'{self.achieved_real_time_factor:.2f}')

@@ -2,7 +2,8 @@
 Message conversions in both directions, written once for every helio package.
 
 - ``image_to_numpy`` / ``numpy_to_image``: sensor_msgs/Image <-> numpy arrays (the role
-  cv_bridge plays elsewhere; table below).
+  cv_bridge plays elsewhere; table below); ``serialized_image``: the same Image as the
+  serialised bytes a publisher sends (for frames published many times a second).
 - ``camera_from_info`` / ``camera_info_from_camera``: sensor_msgs/CameraInfo <->
   ``helio_optics.geometry.PinholeCamera`` (plumb_bob distortion).
 - ``stamp_to_seconds`` / ``stamp_to_nanoseconds`` / ``stamp_from_seconds``:
@@ -33,6 +34,7 @@ This module imports message packages but not rclpy, so it is usable without ``rc
 """
 
 import math
+import struct
 import sys
 
 from builtin_interfaces.msg import Time
@@ -121,6 +123,70 @@ def numpy_to_image(array, encoding, header=None, is_bigendian=False, step=None):
     row) defaults to the packed row size; a larger value pads each row with zeros.
     `is_bigendian` writes multi-byte samples big-endian.
     """
+    height, width, step, rows = _image_rows(array, encoding, is_bigendian, step)
+    msg = Image()
+    if header is not None:
+        msg.header = header
+    msg.height, msg.width, msg.step = height, width, step
+    msg.encoding = encoding
+    msg.is_bigendian = bool(is_bigendian)
+    msg.data = rows.tobytes()
+    return msg
+
+
+def serialized_image(array, encoding, stamp, frame_id='', is_bigendian=False, step=None):
+    """
+    Return ``numpy_to_image``'s sensor_msgs/Image serialised, for ``Publisher.publish(bytes)``.
+
+    The bytes ``rclpy.serialization.serialize_message`` gives for the message (tested):
+    CDR, little endian, each field aligned to its size from the end of the 4-byte
+    encapsulation header. Publishing them skips building the message's Python object and
+    its conversion to C: a third of the publish of a 640 x 480 rgb8 frame (0.26 of
+    0.76 ms, measured with a subscriber in another process). `stamp` is a
+    builtin_interfaces/Time.
+    """
+    if sys.byteorder != 'little':
+        raise RuntimeError('serialized_image writes little-endian CDR on little-endian hosts '
+                           'only; publish numpy_to_image() instead')
+    height, width, step, rows = _image_rows(array, encoding, is_bigendian, step)
+    writer = _CdrWriter()
+    writer.add('<iI', stamp.sec, stamp.nanosec)
+    writer.add_string(frame_id)
+    writer.add('<II', height, width)
+    writer.add_string(encoding)
+    writer.add('<B', 1 if is_bigendian else 0)
+    writer.add('<II', step, rows.nbytes)
+    writer.parts.append(rows.data if rows.flags.c_contiguous else rows.tobytes())
+    return b''.join(writer.parts)
+
+
+class _CdrWriter:
+    """The parts of a little-endian CDR (XCDR1) message, fields aligned to their sizes."""
+
+    HEADER = b'\x00\x01\x00\x00'     # CDR_LE encapsulation, no options
+
+    def __init__(self):
+        self.parts = [self.HEADER]
+        self._offset = 0       # from the end of the encapsulation header
+
+    def add(self, layout, *values):
+        """Add `values` packed by struct `layout` (one field size: 1 or 4 bytes)."""
+        size = struct.calcsize(layout[1:2])
+        padding = -self._offset % size
+        data = b'\0' * padding + struct.pack(layout, *values)
+        self.parts.append(data)
+        self._offset += len(data)
+
+    def add_string(self, text):
+        """Add a CDR string: its length with the terminating NUL, the UTF-8 bytes, NUL."""
+        data = text.encode('utf-8') + b'\0'
+        self.add('<I', len(data))
+        self.parts.append(data)
+        self._offset += len(data)
+
+
+def _image_rows(array, encoding, is_bigendian=False, step=None):
+    """Return (height, width, step, rows (H, step) uint8) of an image array; see numpy_to_image."""
     dtype, channels = encoding_layout(encoding)
     array = np.asarray(array)
     expected = '(H, W)' if channels == 1 else f'(H, W, {channels})'
@@ -147,14 +213,7 @@ def numpy_to_image(array, encoding, header=None, is_bigendian=False, step=None):
         padded = np.zeros((height, step), dtype=np.uint8)
         padded[:, :row_bytes] = rows
         rows = padded
-    msg = Image()
-    if header is not None:
-        msg.header = header
-    msg.height, msg.width, msg.step = height, width, step
-    msg.encoding = encoding
-    msg.is_bigendian = bool(is_bigendian)
-    msg.data = rows.tobytes()
-    return msg
+    return height, width, step, rows
 
 
 # ---- CameraInfo ------------------------------------------------------------------------------
