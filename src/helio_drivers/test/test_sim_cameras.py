@@ -7,7 +7,7 @@ import cv2
 from helio_drivers.sim.cameras import (celsius_to_centikelvin, centikelvin_to_celsius,
                                        NoisyReadOut, RgbCamera, RgbSettings, ThermalCamera,
                                        ThermalSettings)
-from helio_drivers.sim.kernels import bin_on_raster
+from helio_drivers.sim.kernels import _count_below, bin_on_raster
 from helio_drivers.sim.wood import WoodPanel
 from helio_optics.geometry import (intersect_plane, invert_transform, look_at,
                                    transform_points, transform_vectors)
@@ -83,6 +83,20 @@ def test_thermal_image_in_one_pass_equals_the_temperatures_encoded(sigma):
                                                               np.random.default_rng(8)))
         assert np.array_equal(counts, expected) and np.array_equal(kept, expected)
     assert centikelvin_to_celsius(counts.min()) < 30.0
+
+
+def test_the_walked_search_counts_what_numpys_searchsorted_counts_from_any_hint():
+    # the patch's centres: fine cells in the middle, growing outwards (uneven spacing)
+    centres = np.cumsum(np.concatenate([np.geomspace(2e-3, 1e-4, 30), np.full(40, 1e-4),
+                                        np.geomspace(1e-4, 2e-3, 30)])) - 0.02
+    rng = np.random.default_rng(3)
+    values = np.concatenate([rng.uniform(-0.03, 0.03, 2000), centres, centres[::7] + 1e-12,
+                             [-1.0, 1.0]])
+    for value in values:
+        expected = int(np.searchsorted(centres, value))
+        for hint in (expected, expected - 1, expected + 2, 0, len(centres),
+                     int(rng.integers(-5, len(centres) + 5))):
+            assert _count_below(centres, value, hint) == expected, (value, hint)
 
 
 def test_thermal_noise_differs_frame_to_frame():

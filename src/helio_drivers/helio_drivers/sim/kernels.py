@@ -473,12 +473,39 @@ def carried_points(points, slopes, shift_x, shift_y, shift_z, out):
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
-def _axis_weight(centres, value):
-    """Return (i0, weight of i0 + 1) as ``bilinear_weights_on_axis`` finds them."""
+def _count_below(centres, value, hint):
+    """
+    Return how many `centres` (sorted) are below `value`: numpy's searchsorted (left).
+
+    Walked from `hint`, the count for a point nearby (a pixel's neighbour along its image
+    row lands a cell or two away): a step or two instead of a binary search's eight.
+    A walk longer than a few cells gives way to the binary search.
+    """
     n = len(centres)
-    i = min(max(_first_at_or_above(centres, value, False) - 1, 0), n - 2)
+    k = min(max(hint, 0), n)
+    for _ in range(4):
+        if k < n and centres[k] < value:
+            k += 1
+        elif k > 0 and not centres[k - 1] < value:
+            k -= 1
+        else:
+            return k
+    return _first_at_or_above(centres, value, False)
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def _axis_weight(centres, value, hint):
+    """
+    Return (i0, weight of i0 + 1, count below) as ``bilinear_weights_on_axis`` finds them.
+
+    `hint`: the count below of a point nearby (``_count_below``); the third value is
+    this point's, the hint for the next.
+    """
+    n = len(centres)
+    below = _count_below(centres, value, hint)
+    i = min(max(below - 1, 0), n - 2)
     w = (value - centres[i]) / (centres[i + 1] - centres[i])
-    return i, min(max(w, 0.0), 1.0)
+    return i, min(max(w, 0.0), 1.0), below
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
@@ -488,13 +515,15 @@ def thermal_counts_at(x, y, x_centres, y_centres, bounds, surface, far, ambient,
     Fill `out` (H, W) uint16 as ``thermal_counts`` does, from each pixel's ground point.
 
     x, y (H, W) where each pixel's ray meets the panel (NaN: never): the interpolation
-    weights are found per pixel by binary search on the patch's centres (a camera that
-    moves gets a new view every frame: no sampler worth keeping), `bounds` = (x_min,
+    weights are found per pixel on the patch's centres, walking from the last pixel's
+    (``_count_below``; a camera that moves gets a new view every frame: no sampler worth
+    keeping), `bounds` = (x_min,
     x_max, y_min, y_max) of the patch. The same arithmetic as the sampler and
     ``thermal_counts``.
     """
     height, width = x.shape
     columns = len(x_centres)
+    hint_x, hint_y = len(x_centres) // 2, len(y_centres) // 2
     for r in range(height):
         for c in range(width):
             px, py = x[r, c], y[r, c]
@@ -502,8 +531,8 @@ def thermal_counts_at(x, y, x_centres, y_centres, bounds, surface, far, ambient,
             if px == px:
                 if (px >= bounds[0] and px <= bounds[1] and py >= bounds[2]
                         and py <= bounds[3]):
-                    ix, wx = _axis_weight(x_centres, px)
-                    iy, wy = _axis_weight(y_centres, py)
+                    ix, wx, hint_x = _axis_weight(x_centres, px, hint_x)
+                    iy, wy, hint_y = _axis_weight(y_centres, py, hint_y)
                     rise = _bilinear_rise(surface, iy * columns + ix, columns, wx, wy)
                 else:
                     rise = far
