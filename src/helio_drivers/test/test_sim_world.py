@@ -1,5 +1,6 @@
 """The simulated world end to end: clouds, determinism, canvas output, hosted devices."""
 
+import collections
 import concurrent.futures
 import copy
 from dataclasses import replace
@@ -198,14 +199,15 @@ def test_rgb_frames_developed_on_a_thread_while_the_world_steps_equal_rendered_o
 
     Two worlds of one seed along a dot heated until it chars, under a cloud, and a move to
     the next dot: one renders each frame at once (``rgb_image``); the other stages it and
-    develops it on a worker thread while it takes its next steps and thermal frames (which
-    draw from the same random generator). Every frame equal, bit for bit.
+    develops it on a worker thread, two frames in flight, while it takes its next steps
+    and thermal frames (which draw from the same random generator). Every frame equal,
+    bit for bit.
     """
     worlds = [SimWorld(SimSettings(), rig_parameters()) for _ in range(2)]
     dots = ([0.07, 0.07, 0.0], [0.076, 0.07, 0.0])
     for world in worlds:
         world.set_joints(true_sun_focus_joints(world, dots[0], 0.082))
-    rendered, developed, pending = [], [], None
+    rendered, developed, pending = [], [], collections.deque()
     with concurrent.futures.ThreadPoolExecutor(max_workers=1) as worker:
         for k in range(1, 181):
             for world in worlds:
@@ -220,10 +222,10 @@ def test_rgb_frames_developed_on_a_thread_while_the_world_steps_equal_rendered_o
             if k % 2:
                 continue
             rendered.append(worlds[0].rgb_image())
-            if pending is not None:
-                developed.append(pending.result())
-            pending = worker.submit(worlds[1].stage_rgb_frame())
-        developed.append(pending.result())
+            if len(pending) == 2:
+                developed.append(pending.popleft().result())
+            pending.append(worker.submit(worlds[1].stage_rgb_frame()))
+        developed.extend(job.result() for job in pending)
     assert worlds[1].panel.charred_mask().any()
     assert worlds[1].rgb.renders == worlds[0].rgb.renders
     assert worlds[0].rgb.renders['parts'] > 10 and worlds[0].rgb.renders['whole'] > 3
@@ -232,21 +234,24 @@ def test_rgb_frames_developed_on_a_thread_while_the_world_steps_equal_rendered_o
         assert np.array_equal(frame, expected), f'frame {k}'
 
 
-def test_a_staged_rgb_frame_nobody_develops_is_developed_by_the_next_stage():
-    world = SimWorld(FAST, rig_parameters())
-    world.set_joints(true_sun_focus_joints(world, [0.05, 0.07, 0.0], 0.082))
-    world.step()
-    first = world.stage_rgb_frame()           # left alone: no thread develops it
-    world.step()
-    second = world.stage_rgb_frame()          # waits for it: develops it here
+def test_staged_rgb_frames_nobody_develops_are_developed_in_order_when_asked():
     twin = SimWorld(FAST, rig_parameters())
-    twin.set_joints(true_sun_focus_joints(twin, [0.05, 0.07, 0.0], 0.082))
-    twin.step()
-    expected = twin.rgb_image()
-    assert np.array_equal(first(), expected)
-    assert np.array_equal(first(), expected)  # called again: the same image, not redone
-    twin.step()
-    assert np.array_equal(second(), twin.rgb_image())
+    world = SimWorld(FAST, rig_parameters())
+    expected, staged = [], []
+    for k in range(4):
+        for each in (twin, world):
+            each.set_joints(true_sun_focus_joints(each, [0.05 + 0.001 * (k // 2), 0.07, 0.0],
+                                                  0.082))
+            each.step()
+        expected.append(twin.rgb_image())
+        staged.append(world.stage_rgb_frame())     # left alone: no thread develops them
+    assert not any(frame.done() for frame in staged)
+    assert np.array_equal(staged[2](), expected[2])   # develops the first three, in order
+    assert [frame.done() for frame in staged] == [True, True, True, False]
+    for frame, image in zip(staged, expected):
+        assert np.array_equal(frame(), image)
+        assert np.array_equal(frame(), image)     # called again: the same image, not redone
+    assert world.rgb.renders == twin.rgb.renders
 
 
 def test_an_rgb_frame_that_fails_to_develop_raises_to_every_caller():

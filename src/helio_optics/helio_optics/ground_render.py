@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import math
 
 import cv2
-from helio_optics.geometry import PinholeCamera, transform_vectors
+from helio_optics.geometry import PinholeCamera
 import numpy as np
 
 WOOD_RGB = (196, 160, 112)  # light pine, 8-bit sRGB
@@ -417,7 +417,8 @@ class GroundRenderer:
         vs = (np.arange(camera.height)[:, None] + offsets[None, :]).reshape(-1)
         grid_u, grid_v = np.meshgrid(us, vs)
         rays = camera.pixel_rays(np.stack([grid_u.ravel(), grid_v.ravel()], axis=-1))
-        self._rays = rays.astype(np.float64)
+        # one row per axis (3, N): the pose's rotation then makes each row in one pass
+        self._rays = np.ascontiguousarray(rays.T, dtype=np.float64)
         self._shape = (camera.height * s, camera.width * s)
         self._pose_key = None       # pose of the cached ground points
         self._ground = None         # (x, y) sub-pixel grids for that pose
@@ -427,14 +428,17 @@ class GroundRenderer:
 
     def ground_points(self, T_world_camera):
         """Return world (x, y) grids [m] where each sub-pixel ray meets z = 0 (NaN if never)."""
-        directions = transform_vectors(T_world_camera, self._rays)
+        T_world_camera = np.asarray(T_world_camera, dtype=float)
+        directions = T_world_camera[:3, :3] @ self._rays       # (3, N) world directions
         origin = T_world_camera[:3, 3]
         with np.errstate(divide='ignore', invalid='ignore'):
-            scale = -origin[2] / directions[:, 2]
-        scale = np.where((scale > 0) & np.isfinite(scale), scale, np.nan)
-        x = (origin[0] + scale * directions[:, 0]).reshape(self._shape)
-        y = (origin[1] + scale * directions[:, 1]).reshape(self._shape)
-        return x, y
+            scale = np.divide(-origin[2], directions[2])
+        scale[~((scale > 0) & np.isfinite(scale))] = np.nan
+        x = directions[0] * scale
+        x += origin[0]
+        y = directions[1] * scale
+        y += origin[1]
+        return x.reshape(self._shape), y.reshape(self._shape)
 
     def webcam(self, settings):
         """Return the (cached) Webcam pipeline of `settings` for this camera."""

@@ -317,13 +317,16 @@ class DevelopingFrame:
     """
     A staged RGB frame (``RgbCamera.stage``): call it, once or more, on any thread, for its image.
 
-    The first caller develops it; a caller meanwhile waits for that one. An error while
-    developing is raised to every caller.
+    Frames develop in the order they were staged: a frame first develops (or waits for)
+    the one staged before it, which it holds until then. The first caller of a frame
+    develops it; a caller meanwhile waits for that one. An error while developing is
+    raised to every caller of that frame.
     """
 
-    def __init__(self, develop):
-        """Hold `develop` (no arguments -> the image) until the first call."""
+    def __init__(self, develop, after=None):
+        """Hold `develop` (no arguments -> the image), to run after frame `after`."""
         self._develop = develop
+        self._after = after
         self._claim = threading.Lock()
         self._done = threading.Event()
         self._image = None
@@ -345,15 +348,27 @@ class DevelopingFrame:
             raise self._error
         return self._image
 
+    def done(self):
+        """Tell whether the frame is developed (or failed to be)."""
+        return self._done.is_set()
+
     def wait_or_develop(self):
-        """Develop the frame here, or wait until the thread that began it has finished."""
+        """Develop the frames staged before this one and it, or wait for who began them."""
+        chain, frame = [], self
+        while frame is not None and not frame._done.is_set():
+            chain.append(frame)
+            frame = frame._after
+        for frame in reversed(chain):
+            frame._develop_or_wait()
+
+    def _develop_or_wait(self):
         if self._claim.acquire(blocking=False):
             try:
                 self._image = self._develop()
             except Exception as error:     # raised to each caller of the frame
                 self._error = error
             finally:
-                self._develop = None
+                self._develop = self._after = None
                 self._done.set()
         else:
             self._done.wait()
@@ -378,9 +393,11 @@ class RgbCamera:
                                      dictionary=dictionary, seed=seed)
         self.extent = tuple(panel_extent)
         self.pixel_size = float(pixel_size)
-        self._wood = decode_srgb8(texture.image)          # linear; rows from y_max (top view)
+        # linear, rows from y_max (top view); RGB and a fourth, empty channel: OpenCV warps
+        # four float channels in half the time of three (``_radiance``)
+        self._wood = _with_padding_channel(decode_srgb8(texture.image))
         self._albedo = GroundTexture(image=self._wood.copy(), extent=self.extent, linear=True)
-        self._char_rgb = decode_srgb8(np.array([CHAR_RGB], np.uint8))[0]
+        self._char_rgb = _with_padding_channel(decode_srgb8(np.array([CHAR_RGB], np.uint8)))[0]
         # the panel's light on the sensor before the optics: albedo x irradiance x exposure
         # (rows from y_max), kept up to date with the char, the window and the clouds
         self._lit = GroundTexture(image=np.empty_like(self._wood), extent=self.extent,
@@ -389,7 +406,7 @@ class RgbCamera:
         self._attenuation = None    # the direct sun's share it was made for
         self._light_source = None   # the light window of the last frame
         self._window_box = None     # its raster box (r0, r1, c0, c1) and its light per unit
-        self._window_light = None   # albedo (exposure x irradiance, (h, w, 3), rows from y_max)
+        self._window_light = None   # albedo (exposure x irradiance, (h, w, 4), rows from y_max)
         self._dirty = []            # raster boxes of `_lit` changed since `_prepared` was made
         self._prepared = None       # the noise-free sensor stage of the frame at `_pose`
         self._pose = None
@@ -402,26 +419,41 @@ class RgbCamera:
             self._index_scale = np.ascontiguousarray(np.broadcast_to(
                 vignette * np.float32(self._read_out.index_scale()), (s.height, s.width, 3)))
         self.renders = {'frames': 0, 'whole': 0, 'parts': 0, 'light': 0}
-        self._developing = None     # the DevelopingFrame staged last, until it is developed
+        self._developing = None     # the DevelopingFrame staged last
+        self._char_changes = []     # (box, char fraction) copied since the last frame
 
     def update_char(self, char, box=None):
         """
         Darken the albedo where the char raster (rows from y_min) changed.
 
         `box` (r0, r1, c0, c1) limits the look to where the panel reported changes (None:
-        nothing changed).
+        nothing changed). The changed part is copied now; the albedo takes it when the next
+        staged frame develops (``stage``), or when the camera is asked for its light.
         """
         if box is None:
             return
-        self._finish_developing()
         r0, r1, c0, c1 = box
+        self._char_changes.append(
+            (tuple(box), np.flipud(char[r0:r1, c0:c1]).astype(np.float32)[:, :, None]))
+
+    def _apply_char_changes(self, changes):
+        """Darken the albedo (and relight the lit texture) by copied char `changes`."""
         height = self._wood.shape[0]
-        chi = np.flipud(char[r0:r1, c0:c1]).astype(np.float32)[:, :, None]
-        top = slice(height - r1, height - r0)
-        self._albedo.image[top, c0:c1] = (self._wood[top, c0:c1] * (1.0 - chi)
-                                          + self._char_rgb * chi)
-        if self._uniform is not None:
-            self._relight(box)
+        for box, chi in changes:
+            r0, r1, c0, c1 = box
+            top = slice(height - r1, height - r0)
+            self._albedo.image[top, c0:c1] = (self._wood[top, c0:c1] * (1.0 - chi)
+                                              + self._char_rgb * chi)
+            if self._uniform is not None:
+                self._relight(box)
+
+    def _settle(self):
+        """Develop (or wait for) every staged frame and take the char changes since."""
+        if self._developing is not None:
+            self._developing.wait_or_develop()
+            self._developing = None
+        changes, self._char_changes = self._char_changes, []
+        self._apply_char_changes(changes)
 
     def top_view(self, char):
         """
@@ -432,7 +464,7 @@ class RgbCamera:
         even white light, one pixel per raster pixel (square).
         """
         chi = np.flipud(np.asarray(char, dtype=np.float32))[:, :, None]
-        albedo = self._wood * (1.0 - chi) + self._char_rgb * chi
+        albedo = self._wood[:, :, :3] * (1.0 - chi) + self._char_rgb[:3] * chi
         return np.rint(255.0 * linear_to_srgb(albedo)).astype(np.uint8)
 
     def render(self, T_world_camera, light=None, attenuation=1.0, rng=None):
@@ -459,58 +491,52 @@ class RgbCamera:
         """
         Take a frame's scene now; return its ``DevelopingFrame`` (call it for the image).
 
-        Staging is the cheap part, on the thread that owns the world: the char (from
-        ``update_char``), the light window and the clouds go into the lit texture, the pose
-        is kept and the frame's noise drawn from `rng`. Developing is the rest (the optics,
-        the sensor stage, the read-out: 90 % of a moving camera's frame) and reads only
-        what staging left in this camera, so it may run on another thread while the world
-        steps on; the next ``stage`` (or ``update_char``) waits for it, or does it if no
-        thread has begun it. The image is the one ``render`` gives for the same calls.
-        Without the linearised read-out (a Bayer mosaic or the exact read-out draw their
-        noise as they go) the frame is developed here, before ``stage`` returns.
+        Staging is the cheap part, on the thread that owns the world: it keeps the pose,
+        the light window, the clouds' share and the char changes since the last frame
+        (``update_char``, copied there) and draws the frame's noise from `rng`.
+        Developing is the rest: the lit texture takes the changes, then the optics, the
+        sensor stage and the read-out (all of a moving camera's cost). It reads nothing the
+        world changes, so it may run on another thread while the world steps on; frames
+        develop in the order they were staged (``DevelopingFrame``), and the images are
+        the ones ``render`` gives for the same calls. Without the linearised read-out (a
+        Bayer mosaic or the exact read-out draw their noise as they go) the frame is
+        developed here, before ``stage`` returns.
         """
-        self._finish_developing()
-        self.renders['frames'] += 1
-        pose = np.asarray(T_world_camera, dtype=np.float64).tobytes()
         T_world_camera = np.array(T_world_camera, dtype=np.float64)
-        attenuation = float(attenuation)
+        scene = (T_world_camera, light, float(attenuation), self._char_changes)
+        self._char_changes = []
+        if self._read_out is None:
+            self._settle()
+            return DevelopingFrame.developed(self._develop(scene, rng=rng))
+        drawn = self._read_out.draw(rng)
+        self._developing = DevelopingFrame(lambda: self._develop(scene, drawn=drawn),
+                                           after=self._developing)
+        return self._developing
+
+    def _develop(self, scene, rng=None, drawn=None):
+        """Make a staged frame: the lit texture's changes, its light where needed, read-out."""
+        T_world_camera, light, attenuation, char_changes = scene
+        self._apply_char_changes(char_changes)
+        self.renders['frames'] += 1
+        pose = T_world_camera.tobytes()
         whole = pose != self._pose or self._prepared is None
         if attenuation != self._attenuation:
             self._set_daylight(attenuation)
             whole = True
         if light is not self._light_source:
             self._set_window(light)
-        rects = []
         if whole:
             self.renders['whole'] += 1
+            self._prepared = self._sensor_stage(self._blur(self._radiance(
+                T_world_camera, self._lit)), (0, 0, self.camera.width, self.camera.height))
             self._pose = pose
         else:
             for box in _merged_boxes(self._dirty):
                 rect = self._image_rect(T_world_camera, self._raster_box_world(*box))
                 if rect is not None:
                     self.renders['parts'] += 1
-                    rects.append(rect)
+                    self._redo(T_world_camera, *rect)
         self._dirty = []
-        if self._read_out is None:
-            return DevelopingFrame.developed(self._develop(T_world_camera, whole, rects, rng))
-        drawn = self._read_out.draw(rng)
-        self._developing = DevelopingFrame(
-            lambda: self._develop(T_world_camera, whole, rects, drawn=drawn))
-        return self._developing
-
-    def _finish_developing(self):
-        """Wait for the frame staged last to be developed (develop it here if nobody has)."""
-        if self._developing is not None:
-            frame, self._developing = self._developing, None
-            frame.wait_or_develop()
-
-    def _develop(self, T_world_camera, whole, rects, rng=None, drawn=None):
-        """Make the staged frame: its light, the sensor stage where needed, the read-out."""
-        if whole:
-            self._prepared = self._sensor_stage(self._blur(self._radiance(
-                T_world_camera, self._lit)), (0, 0, self.camera.width, self.camera.height))
-        for rect in rects:
-            self._redo(T_world_camera, *rect)
         if self._read_out is not None:
             return self._read_out.expose(self._prepared, rng, drawn)
         return self._webcam.expose(self._prepared, rng)
@@ -522,10 +548,11 @@ class RgbCamera:
         Linear, relative to the sensor's full scale before the lens (exposure x albedo x
         irradiance): the ground truth of what the camera images there (for tests).
         """
+        self._settle()
         s = self.settings
         rows, cols, lit = light
         height = self._albedo.image.shape[0]
-        albedo = np.flipud(self._albedo.image[height - rows.stop:height - rows.start, cols])
+        albedo = np.flipud(self._albedo.image[height - rows.stop:height - rows.start, cols, :3])
         irradiance = (s.diffuse_fraction + attenuation * lit) / (1.0 + s.diffuse_fraction)
         return rows, cols, s.exposure * albedo * irradiance[:, :, None]
 
@@ -552,8 +579,8 @@ class RgbCamera:
             direct = np.float32(s.exposure * self._attenuation / (1.0 + s.diffuse_fraction))
             window = np.flipud(lit) * direct
             window += self._uniform - direct
-            # three channels: the texture's multiply then runs along whole rows
-            self._window_light = np.repeat(window[:, :, None], 3, axis=2)
+            # the texture's channels: its multiply then runs along whole rows
+            self._window_light = np.repeat(window[:, :, None], self._lit.image.shape[2], axis=2)
             self._window_box = (rows.start, rows.stop, cols.start, cols.stop)
         if not force:
             self.renders['light'] += 1
@@ -619,12 +646,13 @@ class RgbCamera:
         homography: one ``cv2.warpPerspective`` of the texture (no per-pixel rays, maps or
         NaN handling: a moving camera's frame costs a third). Cameras with distortion,
         supersampling, or pixels that look above the horizon go through
-        ``GroundRenderer.radiance``'s per-pixel rays.
+        ``GroundRenderer.radiance``'s per-pixel rays. Of a four-channel texture (RGB and
+        padding) the light of the three colours.
         """
         mapping = self._texture_homography(T_world_camera, texture)
         if mapping is None:
-            return np.ascontiguousarray(self._renderer.radiance(
-                T_world_camera, texture, background=0.0, rect=rect), dtype=np.float32)
+            return _colours(np.ascontiguousarray(self._renderer.radiance(
+                T_world_camera, texture, background=0.0, rect=rect), dtype=np.float32))
         homography, downward = mapping
         x0, y0, x1, y1 = rect or (0, 0, self.camera.width, self.camera.height)
         if x0 or y0:
@@ -636,6 +664,7 @@ class RgbCamera:
                                     flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                     borderMode=cv2.BORDER_CONSTANT,
                                     borderValue=(0.0,) * max(channels, 1))
+        light = _colours(light)
         if downward is not None:    # the pixels at and above the horizon see no panel
             _blank_above_horizon(light, downward, x0, y0)
         return light
@@ -733,6 +762,20 @@ class RgbCamera:
         wide = (max(inner[0] - margin, 0), max(inner[1] - margin, 0),
                 min(inner[2] + margin, width), min(inner[3] + margin, height))
         return wide, inner
+
+
+def _with_padding_channel(rgb):
+    """Return (..., 3) `rgb` as a contiguous (..., 4) array whose fourth channel is 0."""
+    padded = np.zeros(rgb.shape[:-1] + (4,), rgb.dtype)
+    padded[..., :3] = rgb
+    return padded
+
+
+def _colours(light):
+    """Return the three colour channels of (H, W, 4) `light` (contiguous); others as given."""
+    if light.ndim == 3 and light.shape[2] == 4:
+        return cv2.cvtColor(light, cv2.COLOR_RGBA2RGB)
+    return light
 
 
 def _blank_above_horizon(light, downward, x0, y0):

@@ -13,7 +13,7 @@ and publishes:
   ``thermal_rate`` (sensor-data QoS); each image is rendered only while someone
   subscribes to it (the camera_info always goes out); an RGB frame's scene is taken at its
   stamp and the frame developed on a thread of its own (``rgb_thread``) while the world
-  steps on, published before the next one is taken;
+  steps on, published before the world passes the stamp of the frame after next;
 - ``sim/canvas`` (mono8 top view of the char map, 255 bare wood) at ``canvas_rate``;
 - the world's ground truth for tests and recordings, under ``sim/truth/`` (reliable,
   transient local, every ``truth_period``): ``sun_direction`` (geometry_msgs/Vector3Stamped,
@@ -52,6 +52,7 @@ At shutdown it writes ``canvas.png`` (the burnt panel as a person sees it),
 ``canvas_mask.png`` (the char map) and ``dots.csv`` into ``output_dir`` (if set).
 """
 
+import collections
 import concurrent.futures
 import threading
 import time
@@ -175,6 +176,7 @@ class SimWorldNode(Node):
 
     # the parameters that can change at run time
     RUNTIME = ('cloud_schedule', 'unplugged', 'real_time_factor')
+    RGB_FRAMES_IN_FLIGHT = 2     # on the RGB thread, at most (rgb_thread)
 
     def __init__(self, **kwargs):
         """Declare parameters, build the world and the devices, start the stepping thread."""
@@ -291,14 +293,14 @@ class SimWorldNode(Node):
             self.create_subscription(
                 ThermalStats, lockstep_topic, self._on_lockstep,
                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
-        self._rgb_job = None
+        self._rgb_jobs = collections.deque()     # RGB frames developing on the RGB thread
         self._rgb_thread = concurrent.futures.ThreadPoolExecutor(
             max_workers=1, thread_name_prefix='sim-rgb') if declare(
             self, 'rgb_thread', True,
             "Develop each RGB frame (its optics and read-out, most of a moving camera's "
             'cost) on a thread of its own while the world steps on: the image goes out '
-            'within one frame period of simulated time after its stamp, never after the '
-            'next frame; false: on the stepping thread, before the next /clock') else None
+            'within two frame periods of simulated time after its stamp; false: on the '
+            'stepping thread, before the next /clock') else None
         self._stop = threading.Event()
         self.achieved_real_time_factor = 0.0
         self.step_errors = 0
@@ -439,25 +441,24 @@ class SimWorldNode(Node):
         """
         Take the RGB frame now and publish it: developed on the RGB thread, or here.
 
-        With ``rgb_thread`` the frame's optics and read-out run beside the world's next
-        steps; the frame taken before goes out first (``_finish_rgb``), so an image is
-        published before the world passes the next frame's time.
+        With ``rgb_thread`` the frame's lit texture, optics and read-out are made beside
+        the world's next steps, at most ``RGB_FRAMES_IN_FLIGHT`` frames at a time: the
+        world waits for the oldest before it takes another, so an image is published
+        before the world passes the stamp of the frame after next.
         """
-        self._finish_rgb()
+        while len(self._rgb_jobs) >= self.RGB_FRAMES_IN_FLIGHT:
+            self._finish_rgb(self._rgb_jobs.popleft())
         if self._rgb_thread is None or self.rgb_pub.get_subscription_count() == 0:
             self._publish_frame(self.rgb_pub, self.world.rgb_image, 'rgb8', self.rgb_info_pub,
                                 self._rgb_info, stamp)
             return
         frame = self.world.stage_rgb_frame()
-        self._rgb_job = self._rgb_thread.submit(
+        self._rgb_jobs.append(self._rgb_thread.submit(
             lambda: self._send_frame(self.rgb_pub, frame(), 'rgb8', self.rgb_info_pub,
-                                     self._rgb_info, stamp))
+                                     self._rgb_info, stamp)))
 
-    def _finish_rgb(self):
-        """Wait until the RGB frame on the RGB thread is published; log it if it failed."""
-        job, self._rgb_job = self._rgb_job, None
-        if job is None:
-            return
+    def _finish_rgb(self, job):
+        """Wait until an RGB frame on the RGB thread is published; log it if it failed."""
         try:
             job.result()
         except Exception as error:  # keep simulating; a broken frame is logged
@@ -496,7 +497,8 @@ class SimWorldNode(Node):
             return
         self._stop.set()
         self._thread.join(timeout=10.0)
-        self._finish_rgb()
+        while self._rgb_jobs:
+            self._finish_rgb(self._rgb_jobs.popleft())
         if self._rgb_thread is not None:
             self._rgb_thread.shutdown(wait=True)
         self.get_logger().info(
