@@ -7,10 +7,11 @@ from helio_optics.geometry import homogeneous, PinholeCamera, rotation_y, rotati
 from helio_optics.node_kit.conversions import (
     array_to_point, camera_from_info, camera_info_from_camera, ENCODINGS, image_to_numpy,
     ImageConversionError, matrix_to_pose, numpy_to_image, point_to_array, pose_to_matrix,
-    serialized_image, stamp_from_seconds, stamp_to_nanoseconds, stamp_to_seconds)
+    restamped, serialized_image, stamp_from_seconds, stamp_to_nanoseconds, stamp_to_seconds)
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Image
 
 
@@ -194,3 +195,22 @@ def test_serialized_image_is_what_rclpy_serializes(encoding, frame_id, big_endia
 def test_serialized_image_refuses_what_numpy_to_image_refuses():
     with pytest.raises(ImageConversionError, match='rgb8 needs dtype uint8'):
         serialized_image(np.zeros((2, 2, 3), np.uint16), 'rgb8', stamp_from_seconds(1.0))
+
+
+def test_a_restamped_camera_info_or_clock_is_the_message_with_the_new_stamp():
+    info = camera_info_from_camera(PinholeCamera.from_fov(160, 120, 0.8), None, 'thermal')
+    clock = Clock()
+    for message in (info, clock):
+        template = serialize_message(message)
+        for seconds in (0.0, 1.5, 86400.000000001, 2.0 ** 31 - 1.0):
+            stamp = stamp_from_seconds(seconds)
+            back = deserialize_message(restamped(template, stamp), type(message))
+            if isinstance(message, Clock):
+                assert back.clock == stamp
+                message.clock = stamp
+            else:
+                assert back.header.stamp == stamp
+                message.header.stamp = stamp
+            assert back == message
+    with pytest.raises(ValueError, match='little-endian CDR'):
+        restamped(b'\x00\x00\x00\x00' + bytes(8), stamp_from_seconds(1.0))

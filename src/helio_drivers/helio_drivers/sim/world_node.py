@@ -64,8 +64,8 @@ from helio_drivers.sim.warm_up import warm_up
 from helio_drivers.sim.world import flat_settings, settings_from_flat, SimSettings, SimWorld
 from helio_msgs.msg import LightTruth, ThermalStats
 from helio_optics.node_kit.conversions import array_to_point, camera_info_from_camera
-from helio_optics.node_kit.conversions import matrix_to_pose, numpy_to_image, serialized_image
-from helio_optics.node_kit.conversions import stamp_to_seconds
+from helio_optics.node_kit.conversions import matrix_to_pose, numpy_to_image, restamped
+from helio_optics.node_kit.conversions import serialized_image, stamp_to_seconds
 from helio_optics.node_kit.deployment import rig_file_or_default, RIG_FILE_PARAMETER
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
@@ -75,6 +75,7 @@ import rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from rclpy.qos import ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 
@@ -263,6 +264,10 @@ class SimWorldNode(Node):
         # the intrinsics do not change: each CameraInfo is built once, restamped per frame
         self._thermal_info = camera_info_from_camera(self.world.thermal.camera, None, 'thermal')
         self._rgb_info = camera_info_from_camera(self.world.rgb.camera, None, 'rgb')
+        # published serialised, restamped: no message object per frame or step
+        self._info_bytes = {id(info): serialize_message(info)
+                            for info in (self._thermal_info, self._rgb_info)}
+        self._clock_bytes = serialize_message(Clock())
         max_lag = declare(
             self, 'pace_max_lag', 0.5,
             'How far behind its pace (real_time_factor, or lockstep_fallback_factor) the '
@@ -404,9 +409,7 @@ class SimWorldNode(Node):
 
     def _publish_due(self):
         stamp = self._stamp()
-        clock = Clock()
-        clock.clock = stamp
-        self.clock_pub.publish(clock)
+        self.clock_pub.publish(restamped(self._clock_bytes, stamp))
         if self._due('thermal', self.thermal_rate):
             self._publish_frame(self.thermal_pub, self.world.thermal_image, '16UC1',
                                 self.thermal_info_pub, self._thermal_info, stamp)
@@ -428,14 +431,12 @@ class SimWorldNode(Node):
         if image_pub.get_subscription_count() > 0:
             self._send_frame(image_pub, render(), encoding, info_pub, info, stamp)
         else:
-            info.header.stamp = stamp
-            info_pub.publish(info)
+            info_pub.publish(restamped(self._info_bytes[id(info)], stamp))
 
     def _send_frame(self, image_pub, array, encoding, info_pub, info, stamp):
         """Publish a camera's image `array` (serialised: no message object) and its CameraInfo."""
         image_pub.publish(serialized_image(array, encoding, stamp, info.header.frame_id))
-        info.header.stamp = stamp
-        info_pub.publish(info)
+        info_pub.publish(restamped(self._info_bytes[id(info)], stamp))
 
     def _publish_rgb(self, stamp):
         """

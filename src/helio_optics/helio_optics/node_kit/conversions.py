@@ -3,7 +3,8 @@ Message conversions in both directions, written once for every helio package.
 
 - ``image_to_numpy`` / ``numpy_to_image``: sensor_msgs/Image <-> numpy arrays (the role
   cv_bridge plays elsewhere; table below); ``serialized_image``: the same Image as the
-  serialised bytes a publisher sends (for frames published many times a second).
+  serialised bytes a publisher sends (for frames published many times a second);
+  ``restamped``: a serialised stamped message (CameraInfo, Clock) with a new stamp.
 - ``camera_from_info`` / ``camera_info_from_camera``: sensor_msgs/CameraInfo <->
   ``helio_optics.geometry.PinholeCamera`` (plumb_bob distortion).
 - ``stamp_to_seconds`` / ``stamp_to_nanoseconds`` / ``stamp_from_seconds``:
@@ -158,6 +159,22 @@ def serialized_image(array, encoding, stamp, frame_id='', is_bigendian=False, st
     writer.add('<II', step, rows.nbytes)
     writer.parts.append(rows.data if rows.flags.c_contiguous else rows.tobytes())
     return b''.join(writer.parts)
+
+
+def restamped(serialized, stamp):
+    """
+    Return a serialised message whose first field is its stamp, with `stamp` there instead.
+
+    For messages published often that change only their stamp (a sensor_msgs/CameraInfo
+    or any message that begins with a std_msgs/Header, a rosgraph_msgs/Clock): serialise
+    once (``rclpy.serialization.serialize_message``), restamp per publication (a
+    ``Publisher.publish(bytes)``). `stamp` is a builtin_interfaces/Time; ValueError for
+    bytes that are not little-endian CDR.
+    """
+    if bytes(serialized[:4]) != _CdrWriter.HEADER or len(serialized) < 12:
+        raise ValueError('restamped needs a little-endian CDR message beginning with a stamp')
+    return b''.join((serialized[:4], struct.pack('<iI', stamp.sec, stamp.nanosec),
+                     serialized[12:]))
 
 
 class _CdrWriter:
