@@ -64,7 +64,7 @@ from helio_drivers.sim.warm_up import warm_up
 from helio_drivers.sim.world import flat_settings, settings_from_flat, SimSettings, SimWorld
 from helio_msgs.msg import LightTruth, ThermalStats
 from helio_optics.node_kit.conversions import array_to_point, camera_info_from_camera
-from helio_optics.node_kit.conversions import matrix_to_pose, numpy_to_image, restamped
+from helio_optics.node_kit.conversions import matrix_to_pose, restamped
 from helio_optics.node_kit.conversions import serialized_image, stamp_to_seconds
 from helio_optics.node_kit.deployment import rig_file_or_default, RIG_FILE_PARAMETER
 from helio_optics.node_kit.parameters import declare
@@ -420,9 +420,8 @@ class SimWorldNode(Node):
             truth.pose = matrix_to_pose(self.world.camera_poses()[0])
             self.truth_rgb_pub.publish(truth)
         if self._due('canvas', self.canvas_rate):
-            image = numpy_to_image(self.world.canvas_image(), 'mono8')
-            image.header.stamp, image.header.frame_id = stamp, 'world'
-            self.canvas_pub.publish(image)
+            self.canvas_pub.publish(serialized_image(self.world.canvas_image(), 'mono8', stamp,
+                                                     'world'))
         if self._due('truth', 1.0 / self.truth_period):
             self._publish_truth(stamp)
 
