@@ -14,7 +14,7 @@ from helio_optics.node_kit.in_process_graph import InProcessGraph
 from helio_optics.rig_kinematics import default_rig_file
 import numpy as np
 import pytest
-from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 import yaml
@@ -63,6 +63,38 @@ def test_sim_world_publishes_clock_cameras_canvas_and_truth_on_sim_time(tmp_path
             node.world.T_robot_world, abs=1e-12)
     assert (tmp_path / 'out' / 'canvas.png').exists()
     assert (tmp_path / 'out' / 'dots.csv').exists()
+
+
+def rgb_frames_of_a_node(tmp_path, count, **parameters):
+    """Return {stamp: rgb8 bytes} of the first `count` RGB images of a sim_world node."""
+    with InProcessGraph('probe') as graph:
+        graph.add(SimWorldNode(**graph.node_options(
+            real_time_factor=4.0, lockstep_topic='', dobot_port=str(tmp_path / 'dobot'),
+            servo_port=str(tmp_path / 'servo'), rig_file=default_rig_file(), flux_rays=5000,
+            **parameters)))
+        images = graph.collect(Image, 'rgb/image_raw', QoSProfile(
+            depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
+        images.wait_for_count(count, timeout=60.0)
+        return {stamp_to_seconds(m.header.stamp): bytes(m.data) for m in images.messages}
+
+
+def test_rgb_frames_developed_on_the_rgb_thread_are_the_ones_made_before_the_next_clock(
+        tmp_path):
+    """
+    The node's RGB thread (``rgb_thread``) publishes the images the stepping thread makes.
+
+    Two nodes of one seed, the devices at rest: frames developed beside the steps and
+    frames made on the stepping thread before the next /clock, the same bytes at the same
+    stamps, every due frame (5 Hz of simulated time).
+    """
+    threaded = rgb_frames_of_a_node(tmp_path / 'a', 8, rgb_thread=True)
+    in_line = rgb_frames_of_a_node(tmp_path / 'b', 8, rgb_thread=False)
+    stamps = sorted(set(threaded) & set(in_line))
+    assert len(stamps) >= 6
+    # every due frame: 0.2 s apart (after the first step's, 0.1 s before the schedule's)
+    assert all(b - a == pytest.approx(0.2, abs=1e-6) for a, b in zip(stamps[1:], stamps[2:]))
+    for stamp in stamps:
+        assert threaded[stamp] == in_line[stamp], f'the frame at {stamp:.1f} s'
 
 
 def test_config_file_documents_every_world_setting_with_the_code_defaults():

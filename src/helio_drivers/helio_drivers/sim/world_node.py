@@ -14,7 +14,8 @@ and publishes:
   subscribes to it (the camera_info always goes out); an RGB frame's scene is taken at its
   stamp and the frame developed on a thread of its own (``rgb_thread``) while the world
   steps on, published before the world passes the stamp of the frame after next;
-- ``sim/canvas`` (mono8 top view of the char map, 255 bare wood) at ``canvas_rate``;
+- ``sim/canvas`` (mono8 top view of the char map, 255 bare wood) at ``canvas_rate``, while
+  someone subscribes to it;
 - the world's ground truth for tests and recordings, under ``sim/truth/`` (reliable,
   transient local, every ``truth_period``): ``sun_direction`` (geometry_msgs/Vector3Stamped,
   the true sun ray s0 in the robot frame), ``world_pose`` (geometry_msgs/PoseStamped, the
@@ -419,7 +420,7 @@ class SimWorldNode(Node):
             truth.header.stamp, truth.header.frame_id = stamp, 'world'
             truth.pose = matrix_to_pose(self.world.camera_poses()[0])
             self.truth_rgb_pub.publish(truth)
-        if self._due('canvas', self.canvas_rate):
+        if self._due('canvas', self.canvas_rate) and self.canvas_pub.get_subscription_count():
             self.canvas_pub.publish(serialized_image(self.world.canvas_image(), 'mono8', stamp,
                                                      'world'))
         if self._due('truth', 1.0 / self.truth_period):
