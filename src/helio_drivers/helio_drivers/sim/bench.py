@@ -25,10 +25,13 @@ process at ``real_time_factor`` 0 with this process subscribed to both cameras a
 ``/clock``, both with the graph's Fast DDS profile for camera images
 (``fastdds_large_images.xml``, as ``helio_control.bringup`` starts every node); this
 process drives the emulated Dobot and Maestro over their pseudo-terminals as the drivers
-would. ``sim_node_heating_*`` holds the lens on a dot, ``sim_node_moving_*``
-commands the next of two dots as soon as the last move ended; CPU is the node process's
-(``/proc``), and ``sim_node_*_rgb_hz`` / ``_thermal_hz`` count the frames received per
-simulated second.
+would: each device's joints read at 20 Hz of wall time (their ``joint_states``), a running
+move polled as the drivers poll it (the arm's alarms, pose and executed index, the servos'
+moving state and positions), but at every turn of the probe's loop, not every 20 ms: the
+next move starts at once, so the lens moves all the time however fast the world runs.
+``sim_node_heating_*`` holds the lens on a dot, ``sim_node_moving_*`` commands the next of
+two dots as soon as the last move ended; CPU is the node process's (``/proc``), and
+``sim_node_*_rgb_hz`` / ``_thermal_hz`` count the frames received per simulated second.
 
 Per-part costs (``*_ms_median``, CPU time): ``sim_heat_step``, ``sim_flux_trace``
 (re-trace after the sun turned), ``sim_flux_carry`` (the moving lens's rays carried along
@@ -68,6 +71,7 @@ D_LP = 0.082          # heating distance [m]
 RETREAT = 0.03        # [m]
 N_P_TARGET = 30
 DDS_PROFILE_ENV = 'FASTRTPS_DEFAULT_PROFILES_FILE'
+JOINT_STATE_RATE = 20.0   # [Hz wall] each driver's joint_states (device_action_node)
 
 
 def _rig():
@@ -318,8 +322,29 @@ class NodeRun:
         """Tell whether both devices finished the last command."""
         return self.dobot.executed_index() >= index and not self.servo.moving()
 
+    def read_joints(self):
+        """Read both devices' joints as the drivers' joint_states do (pose; two positions)."""
+        self.dobot.get_pose()
+        for channel in (self.calibrations.yaw_channel, self.calibrations.pitch_channel):
+            self.servo.get_position(channel)
+
+    def poll_move(self, index):
+        """Poll a move as the drivers' device threads do; tell whether both arrived."""
+        self.dobot.get_alarms()
+        self.dobot.get_pose()
+        arm = self.dobot.executed_index() >= index
+        wrist = not self.servo.moving()
+        for channel in (self.calibrations.yaw_channel, self.calibrations.pitch_channel):
+            self.servo.get_position(channel)
+        return arm and wrist
+
     def measure(self, wall_seconds, between=None):
-        """Return (simulated, wall, node cpu, frames) over `wall_seconds`, calling `between`."""
+        """
+        Return (simulated, wall, node cpu, frames) over `wall_seconds`.
+
+        The joints are read as the drivers' joint_states read them (every
+        1 / JOINT_STATE_RATE of wall time); `between` (a move's polling) runs at every turn.
+        """
         self.spin(0.3)
         deadline = time.monotonic() + 30.0
         while self.sim_time == 0.0:     # from the first /clock on, not from time 0
@@ -330,10 +355,18 @@ class NodeRun:
             time.monotonic()
         counts0 = dict(self.counts)
         end = wall0 + wall_seconds
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.01)
+        next_joints = wall0
+        while True:
+            now = time.monotonic()
+            if now >= end:
+                break
+            if now >= next_joints:
+                self.read_joints()
+                next_joints += 1.0 / JOINT_STATE_RATE
             if between is not None:
                 between()
+            wait = 0.01 if between is not None else min(next_joints, end) - now
+            self.executor.spin_once(timeout_sec=max(wait, 0.0))
         simulated = self.sim_time - sim0
         frames = {name: self.counts[name] - counts0[name] for name in self.counts}
         return (simulated, time.monotonic() - wall0,
@@ -380,7 +413,7 @@ def bench_node(rig_file, wall_seconds, busy):
                     state = {'k': 0, 'index': run.command(focus[1])}
 
                     def keep_moving():
-                        if run.arrived(state['index']):
+                        if run.poll_move(state['index']):
                             state['k'] ^= 1
                             state['index'] = run.command(focus[state['k']])
                     moving = run.measure(wall_seconds, keep_moving)
