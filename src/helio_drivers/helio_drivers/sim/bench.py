@@ -331,11 +331,9 @@ class NodeRun:
     def poll_move(self, index):
         """Poll a move as the drivers' device threads do; tell whether both arrived."""
         self.dobot.get_alarms()
-        self.dobot.get_pose()
         arm = self.dobot.executed_index() >= index
         wrist = not self.servo.moving()
-        for channel in (self.calibrations.yaw_channel, self.calibrations.pitch_channel):
-            self.servo.get_position(channel)
+        self.read_joints()      # the arm's pose and the servos' positions
         return arm and wrist
 
     def measure(self, wall_seconds, between=None):

@@ -517,9 +517,8 @@ def thermal_counts_at(x, y, x_centres, y_centres, bounds, surface, far, ambient,
     x, y (H, W) where each pixel's ray meets the panel (NaN: never): the interpolation
     weights are found per pixel on the patch's centres, walking from the last pixel's
     (``_count_below``; a camera that moves gets a new view every frame: no sampler worth
-    keeping), `bounds` = (x_min,
-    x_max, y_min, y_max) of the patch. The same arithmetic as the sampler and
-    ``thermal_counts``.
+    keeping), `bounds` = (x_min, x_max, y_min, y_max) of the patch. The same arithmetic as
+    the sampler and ``thermal_counts``.
     """
     height, width = x.shape
     columns = len(x_centres)

@@ -55,6 +55,7 @@ At shutdown it writes ``canvas.png`` (the burnt panel as a person sees it),
 
 import collections
 import concurrent.futures
+from dataclasses import dataclass
 import threading
 import time
 
@@ -79,6 +80,18 @@ from rclpy.qos import ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
+
+
+@dataclass(frozen=True)
+class CameraTopics:
+    """A camera's publishers, its image encoding and frame id, its CameraInfo serialised."""
+
+    image: object
+    info: object
+    encoding: str
+    frame_id: str
+    info_bytes: bytes
+
 
 TRUTH_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -239,13 +252,8 @@ class SimWorldNode(Node):
             f'{self.real_time_factor:g}; step {self.settings.step:g} s')
 
         self.clock_pub = self.create_publisher(Clock, '/clock', QoSProfile(depth=1))
-        self.rgb_pub = self.create_publisher(Image, 'rgb/image_raw', qos_profile_sensor_data)
-        self.rgb_info_pub = self.create_publisher(CameraInfo, 'rgb/camera_info',
-                                                  qos_profile_sensor_data)
-        self.thermal_pub = self.create_publisher(Image, 'thermal/image_raw',
-                                                 qos_profile_sensor_data)
-        self.thermal_info_pub = self.create_publisher(CameraInfo, 'thermal/camera_info',
-                                                      qos_profile_sensor_data)
+        self._rgb_topics = self._camera_topics('rgb', 'rgb8', self.world.rgb.camera)
+        self._thermal_topics = self._camera_topics('thermal', '16UC1', self.world.thermal.camera)
         self.canvas_pub = self.create_publisher(Image, 'sim/canvas', QoSProfile(depth=1))
         self.truth_sun_pub = self.create_publisher(Vector3Stamped, 'sim/truth/sun_direction',
                                                    TRUTH_QOS)
@@ -262,12 +270,7 @@ class SimWorldNode(Node):
             'plug back in.', dynamic=True))
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._next = {'rgb': 0.0, 'thermal': 0.0, 'canvas': 0.0, 'truth': 0.0}
-        # the intrinsics do not change: each CameraInfo is built once, restamped per frame
-        self._thermal_info = camera_info_from_camera(self.world.thermal.camera, None, 'thermal')
-        self._rgb_info = camera_info_from_camera(self.world.rgb.camera, None, 'rgb')
-        # published serialised, restamped: no message object per frame or step
-        self._info_bytes = {id(info): serialize_message(info)
-                            for info in (self._thermal_info, self._rgb_info)}
+        # published serialised, restamped: no message object per step
         self._clock_bytes = serialize_message(Clock())
         max_lag = declare(
             self, 'pace_max_lag', 0.5,
@@ -312,6 +315,16 @@ class SimWorldNode(Node):
         self.step_errors = 0
         self._thread = threading.Thread(target=self._run, name='sim-world', daemon=True)
         self._thread.start()
+
+    def _camera_topics(self, name, encoding, camera):
+        """Return the CameraTopics of camera `name`: `name`/image_raw and `name`/camera_info."""
+        # the intrinsics do not change: the CameraInfo is serialised once, restamped per frame
+        return CameraTopics(
+            image=self.create_publisher(Image, f'{name}/image_raw', qos_profile_sensor_data),
+            info=self.create_publisher(CameraInfo, f'{name}/camera_info',
+                                       qos_profile_sensor_data),
+            encoding=encoding, frame_id=name,
+            info_bytes=serialize_message(camera_info_from_camera(camera, None, name)))
 
     def _declare(self, name, default):
         description, minimum, maximum = PARAMETER_DOCS.get(name, (name, None, None))
@@ -412,8 +425,7 @@ class SimWorldNode(Node):
         stamp = self._stamp()
         self.clock_pub.publish(restamped(self._clock_bytes, stamp))
         if self._due('thermal', self.thermal_rate):
-            self._publish_frame(self.thermal_pub, self.world.thermal_image, '16UC1',
-                                self.thermal_info_pub, self._thermal_info, stamp)
+            self._publish_frame(self._thermal_topics, self.world.thermal_image, stamp)
         if self._due('rgb', self.rgb_rate):
             self._publish_rgb(stamp)
             truth = PoseStamped()
@@ -426,17 +438,17 @@ class SimWorldNode(Node):
         if self._due('truth', 1.0 / self.truth_period):
             self._publish_truth(stamp)
 
-    def _publish_frame(self, image_pub, render, encoding, info_pub, info, stamp):
+    def _publish_frame(self, camera, render, stamp):
         """Publish a camera's CameraInfo, and its image when someone subscribes to it."""
-        if image_pub.get_subscription_count() > 0:
-            self._send_frame(image_pub, render(), encoding, info_pub, info, stamp)
+        if camera.image.get_subscription_count() > 0:
+            self._send_frame(camera, render(), stamp)
         else:
-            info_pub.publish(restamped(self._info_bytes[id(info)], stamp))
+            camera.info.publish(restamped(camera.info_bytes, stamp))
 
-    def _send_frame(self, image_pub, array, encoding, info_pub, info, stamp):
+    def _send_frame(self, camera, array, stamp):
         """Publish a camera's image `array` (serialised: no message object) and its CameraInfo."""
-        image_pub.publish(serialized_image(array, encoding, stamp, info.header.frame_id))
-        info_pub.publish(restamped(self._info_bytes[id(info)], stamp))
+        camera.image.publish(serialized_image(array, camera.encoding, stamp, camera.frame_id))
+        camera.info.publish(restamped(camera.info_bytes, stamp))
 
     def _publish_rgb(self, stamp):
         """
@@ -449,14 +461,12 @@ class SimWorldNode(Node):
         """
         while len(self._rgb_jobs) >= self.RGB_FRAMES_IN_FLIGHT:
             self._finish_rgb(self._rgb_jobs.popleft())
-        if self._rgb_thread is None or self.rgb_pub.get_subscription_count() == 0:
-            self._publish_frame(self.rgb_pub, self.world.rgb_image, 'rgb8', self.rgb_info_pub,
-                                self._rgb_info, stamp)
+        if self._rgb_thread is None or self._rgb_topics.image.get_subscription_count() == 0:
+            self._publish_frame(self._rgb_topics, self.world.rgb_image, stamp)
             return
         frame = self.world.stage_rgb_frame()
         self._rgb_jobs.append(self._rgb_thread.submit(
-            lambda: self._send_frame(self.rgb_pub, frame(), 'rgb8', self.rgb_info_pub,
-                                     self._rgb_info, stamp)))
+            lambda: self._send_frame(self._rgb_topics, frame(), stamp)))
 
     def _finish_rgb(self, job):
         """Wait until an RGB frame on the RGB thread is published; log it if it failed."""

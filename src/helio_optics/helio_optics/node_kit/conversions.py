@@ -151,13 +151,13 @@ def serialized_image(array, encoding, stamp, frame_id='', is_bigendian=False, st
                            'only; publish numpy_to_image() instead')
     height, width, step, rows = _image_rows(array, encoding, is_bigendian, step)
     writer = _CdrWriter()
-    writer.add('<iI', stamp.sec, stamp.nanosec)
+    writer.add(_CDR_TIME, stamp.sec, stamp.nanosec)
     writer.add_string(frame_id)
     writer.add('<II', height, width)
     writer.add_string(encoding)
     writer.add('<B', 1 if is_bigendian else 0)
     writer.add('<II', step, rows.nbytes)
-    writer.parts.append(rows.data if rows.flags.c_contiguous else rows.tobytes())
+    writer.parts.append(rows.data)      # contiguous (_image_rows)
     return b''.join(writer.parts)
 
 
@@ -173,8 +173,11 @@ def restamped(serialized, stamp):
     """
     if bytes(serialized[:4]) != _CdrWriter.HEADER or len(serialized) < 12:
         raise ValueError('restamped needs a little-endian CDR message beginning with a stamp')
-    return b''.join((serialized[:4], struct.pack('<iI', stamp.sec, stamp.nanosec),
+    return b''.join((serialized[:4], struct.pack(_CDR_TIME, stamp.sec, stamp.nanosec),
                      serialized[12:]))
+
+
+_CDR_TIME = '<iI'     # builtin_interfaces/Time: int32 sec, uint32 nanosec
 
 
 class _CdrWriter:
