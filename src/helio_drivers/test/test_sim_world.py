@@ -7,7 +7,7 @@ from dataclasses import replace
 import math
 
 import cv2
-from helio_drivers.sim.cameras import CHAR_RGB, DevelopingFrame, NoisyReadOut
+from helio_drivers.sim.cameras import CHAR_RGB, DevelopingFrame, light_window, NoisyReadOut
 from helio_drivers.sim.truth import true_sun_focus_joints
 from helio_drivers.sim.world import settings_from_flat, SimSettings, SimWorld
 from helio_optics.ground_render import (decode_srgb8, GroundRenderer, GroundTexture,
@@ -259,3 +259,34 @@ def test_an_rgb_frame_that_fails_to_develop_raises_to_every_caller():
     for _ in range(2):
         with pytest.raises(ZeroDivisionError):
             frame()
+
+
+@pytest.mark.parametrize('target, d_lp', [((0.07, 0.07), 0.082), ((0.02, 0.1), 0.075),
+                                          ((-0.035, 0.155), 0.082)],
+                         ids=['focused', 'defocused', 'at_the_corner'])
+def test_the_light_window_is_the_shadow_and_the_blurred_rays_over_the_whole_window(target,
+                                                                                  d_lp):
+    """light_window bins and blurs the rays over their own box: as over the whole window."""
+    world = SimWorld(FAST, rig_parameters())
+    world.set_joints(true_sun_focus_joints(world, target, d_lp))
+    world.step()
+    field, panel = world.flux_field, world.panel
+    cell, origin = panel.grid.fine_cell, panel.raster_origin
+    rows, cols, lit = light_window(field, panel.raster_shape, origin, cell,
+                                   world._light_window(field))
+    # independently: every pixel centre's shadow test, numpy's histogram of all the rays
+    # over the whole window, the same smoothing over the whole window
+    x = origin[0] + (np.arange(cols.start, cols.stop) + 0.5) * cell
+    y = origin[1] + (np.arange(rows.start, rows.stop) + 0.5) * cell
+    shadow = field.in_shadow(x[None, :], y[:, None])
+    x_edges = origin[0] + np.arange(cols.start, cols.stop + 1) * cell
+    y_edges = origin[1] + np.arange(rows.start, rows.stop + 1) * cell
+    keep = np.all(np.isfinite(field.points), axis=1)
+    binned, _, _ = np.histogram2d(field.points[keep, 1], field.points[keep, 0],
+                                  bins=(y_edges, x_edges), weights=field.power[keep])
+    concentrated = cv2.GaussianBlur((binned / cell ** 2 / field.direct).astype(np.float32),
+                                    (0, 0), 0.7)
+    expected = np.where(shadow, 0.0, 1.0) + concentrated
+    assert lit.dtype == np.float32 and lit.shape == expected.shape
+    assert 0.1 < np.mean(shadow) < 0.9 and lit.max() > 10.0     # a shadow, and a spot
+    assert np.allclose(lit, expected, rtol=1e-6, atol=1e-6)

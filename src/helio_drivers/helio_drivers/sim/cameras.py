@@ -40,6 +40,9 @@ from helio_optics.ground_render import (decode_srgb8, GroundRenderer, GroundText
 import numpy as np
 
 KELVIN = 273.15
+CONCENTRATED_BLUR_SIGMA = 0.7   # the binned rays' smoothing in the light window [raster px]
+# raster pixels around the rays the smoothing reaches (its kernel's radius, 3), twice over
+CONCENTRATED_BLUR_REACH = 8
 CHAR_RGB = (38, 30, 26)     # 8-bit sRGB
 
 
@@ -409,6 +412,8 @@ class RgbCamera:
         self._window_light = None   # albedo (exposure x irradiance, (h, w, 4), rows from y_max)
         self._dirty = []            # raster boxes of `_lit` changed since `_prepared` was made
         self._prepared = None       # the noise-free sensor stage of the frame at `_pose`
+        self._dark = None           # the sensor stage of a frame without light
+        self._lit_rect = None       # the image rectangle `_prepared` may be lit in
         self._pose = None
         self._view = None           # per-pose geometry (`_pose_view`)
         self._view_key = None
@@ -527,8 +532,7 @@ class RgbCamera:
             self._set_window(light)
         if whole:
             self.renders['whole'] += 1
-            self._prepared = self._sensor_stage(self._blur(self._radiance(
-                T_world_camera, self._lit)), (0, 0, self.camera.width, self.camera.height))
+            self._whole_frame(T_world_camera)
             self._pose = pose
         else:
             for box in _merged_boxes(self._dirty):
@@ -627,6 +631,42 @@ class RgbCamera:
         if vignette is not None:
             light = light * vignette[y0:y1, x0:x1]
         return self._webcam.prepare(light)
+
+    def _whole_frame(self, T_world_camera):
+        """
+        Make the frame's sensor stage (`_prepared`) anew at a pose.
+
+        Only the pixels that see the panel or its blur are rendered (``_image_rect`` of the
+        panel, over the kept stage's arrays); the rest see no light and take the dark
+        frame's stage. From the arm's poses the panel's near edge crosses the image, and a
+        third of the frame sees nothing.
+        """
+        width, height = self.camera.width, self.camera.height
+        dark = self._dark_stage()
+        if self._prepared is None:
+            self._prepared = tuple(None if part is None else part.copy() for part in dark)
+            self._lit_rect = (0, 0, 0, 0)
+        x_min, x_max, y_min, y_max = self.extent
+        seen = self._image_rect(T_world_camera, (x_min, x_max, y_min, y_max))
+        rect = (0, 0, 0, 0) if seen is None else seen[1]
+        # dark again: what the last frame lit (`_lit_rect`) outside this frame's `rect`
+        for strip in _rect_minus((0, 0, width, height), rect):
+            box = _rect_intersection(strip, self._lit_rect)
+            if box is not None:
+                for part, value in zip(self._prepared, dark):
+                    if part is not None:
+                        part[box[1]:box[3], box[0]:box[2]] = value[box[1]:box[3], box[0]:box[2]]
+        if seen is not None:
+            self._redo(T_world_camera, *seen)
+        self._lit_rect = rect
+
+    def _dark_stage(self):
+        """Return the sensor stage of a frame that sees no light (worked out once)."""
+        if self._dark is None:
+            light = np.zeros((self.camera.height, self.camera.width, 3), np.float32)
+            self._dark = self._sensor_stage(
+                light, (0, 0, self.camera.width, self.camera.height))
+        return self._dark
 
     def _redo(self, T_world_camera, wide, inner):
         """Redo the frame's sensor stage in `inner` (its light rendered over `wide`)."""
@@ -731,6 +771,10 @@ class RgbCamera:
         cell = self.pixel_size
         return (x_min + c0 * cell, x_min + c1 * cell, y_min + r0 * cell, y_min + r1 * cell)
 
+    def _context_margin(self):
+        """Return the pixels of context around a part of the image that its blur needs."""
+        return self._webcam.blur_margin() + 2
+
     def _image_rect(self, T_world_camera, box):
         """
         Return (wide, inner) image rectangles (x0, y0, x1, y1) [px] of a ground box, or None.
@@ -749,7 +793,7 @@ class RgbCamera:
             homogeneous = corners @ project.T
             if np.all(homogeneous[:, 2] > 0.0):
                 pixels = homogeneous[:, :2] / homogeneous[:, 2:]
-        margin = self._webcam.blur_margin() + 2
+        margin = self._context_margin()
         if pixels is None:
             inner = (0, 0, width, height)
         else:
@@ -794,6 +838,22 @@ def _blank_above_horizon(light, downward, x0, y0):
     for row in np.flatnonzero((left >= 0.0) != (right >= 0.0)):
         columns = np.arange(x0, x0 + width)
         light[row][a * columns + b * rows[row] + c >= 0.0] = 0.0
+
+
+def _rect_intersection(a, b):
+    """Return the intersection of image rectangles (x0, y0, x1, y1), or None."""
+    box = _box_intersection((a[1], a[3], a[0], a[2]), (b[1], b[3], b[0], b[2]))
+    return None if box is None else (box[2], box[0], box[3], box[1])
+
+
+def _rect_minus(rect, hole):
+    """Return up to four image rectangles (x0, y0, x1, y1) covering `rect` without `hole`."""
+    hole = _rect_intersection(rect, hole)
+    if hole is None:
+        return [rect]
+    parts = _box_minus((rect[1], rect[3], rect[0], rect[2]),
+                       (hole[1], hole[3], hole[0], hole[2]))
+    return [(c0, r0, c1, r1) for r0, r1, c0, c1 in parts]
 
 
 def _merged_boxes(boxes):
@@ -860,13 +920,37 @@ def light_window(field, shape, origin, pixel_size, window):
         return None
     xs = origin[0] + (np.arange(c0, c1) + 0.5) * pixel_size
     ys = origin[1] + (np.arange(r0, r1) + 0.5) * pixel_size
-    shadow = field.in_shadow_grid(xs, ys)
-    # the rays' power binned per raster pixel (one compiled pass over the rays)
-    binned = np.zeros((r1 - r0, c1 - c0))
-    bin_on_raster(np.ascontiguousarray(field.points, dtype=float),
-                  np.ascontiguousarray(field.power, dtype=float), float(origin[0]),
-                  float(origin[1]), float(pixel_size), c0, r0, binned)
-    concentrated = binned / (pixel_size * pixel_size) / max(field.direct, 1e-6)
-    concentrated = cv2.GaussianBlur(concentrated.astype(np.float32), (0, 0), 0.7)
-    lit = np.where(shadow, 0.0, 1.0) + concentrated
-    return slice(r0, r1), slice(c0, c1), lit.astype(np.float32)
+    lit = np.logical_not(field.in_shadow_grid(xs, ys)).astype(np.float32)
+    spot = _rays_box(field, origin, pixel_size, (r0, r1, c0, c1), CONCENTRATED_BLUR_REACH)
+    if spot is not None:
+        # the rays' power binned per raster pixel (one compiled pass over the rays) and
+        # blurred, over the rays' box and the blur's reach: zero beyond, in the window
+        s0, s1, t0, t1 = spot
+        binned = np.zeros((s1 - s0, t1 - t0))
+        bin_on_raster(np.ascontiguousarray(field.points, dtype=float),
+                      np.ascontiguousarray(field.power, dtype=float), float(origin[0]),
+                      float(origin[1]), float(pixel_size), t0, s0, binned)
+        concentrated = binned / (pixel_size * pixel_size) / max(field.direct, 1e-6)
+        lit[s0 - r0:s1 - r0, t0 - c0:t1 - c0] += cv2.GaussianBlur(
+            concentrated.astype(np.float32), (0, 0), CONCENTRATED_BLUR_SIGMA)
+    return slice(r0, r1), slice(c0, c1), lit
+
+
+def _rays_box(field, origin, pixel_size, window, reach):
+    """
+    Return the raster box (r0, r1, c0, c1) of a field's rays, `reach` pixels wider, in `window`.
+
+    None when the field has no rays in the window. A blur of the binned rays over this box
+    equals one over the whole window: beyond the rays it sees zeros (`reach` covers the
+    blur's kernel twice over, its reflected border included).
+    """
+    bounds = field.bounds()
+    if bounds is None:
+        return None
+    (x_low, y_low), (x_high, y_high) = bounds
+    r0, r1, c0, c1 = window
+    box = (max(r0, int(math.floor((y_low - origin[1]) / pixel_size)) - reach),
+           min(r1, int(math.floor((y_high - origin[1]) / pixel_size)) + 1 + reach),
+           max(c0, int(math.floor((x_low - origin[0]) / pixel_size)) - reach),
+           min(c1, int(math.floor((x_high - origin[0]) / pixel_size)) + 1 + reach))
+    return box if box[1] > box[0] and box[3] > box[2] else None
