@@ -264,8 +264,8 @@ def test_an_rgb_frame_that_fails_to_develop_raises_to_every_caller():
 @pytest.mark.parametrize('target, d_lp', [((0.07, 0.07), 0.082), ((0.02, 0.1), 0.075),
                                           ((-0.035, 0.155), 0.082)],
                          ids=['focused', 'defocused', 'at_the_corner'])
-def test_the_light_window_is_the_shadow_and_the_blurred_rays_over_the_whole_window(target,
-                                                                                  d_lp):
+def test_the_light_window_is_the_shadow_and_the_rays_blurred_over_the_whole_window(
+        target, d_lp):
     """light_window bins and blurs the rays over their own box: as over the whole window."""
     world = SimWorld(FAST, rig_parameters())
     world.set_joints(true_sun_focus_joints(world, target, d_lp))
