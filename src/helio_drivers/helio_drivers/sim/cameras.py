@@ -31,8 +31,8 @@ import math
 import threading
 
 import cv2
-from helio_drivers.sim.kernels import (bin_on_raster, noisy_read_out, thermal_counts,
-                                       thermal_counts_at, tone_table_read_out)
+from helio_drivers.sim.kernels import (bin_on_raster, noisy_read_out, relit_texture,
+                                       thermal_counts, thermal_counts_at, tone_table_read_out)
 from helio_optics.geometry import PinholeCamera
 from helio_optics.ground_render import (decode_srgb8, GroundRenderer, GroundTexture,
                                         jpeg_round_trip, linear_to_srgb,
@@ -409,7 +409,8 @@ class RgbCamera:
         self._attenuation = None    # the direct sun's share it was made for
         self._light_source = None   # the light window of the last frame
         self._window_box = None     # its raster box (r0, r1, c0, c1) and its light per unit
-        self._window_light = None   # albedo (exposure x irradiance, (h, w, 4), rows from y_max)
+        self._window_light = None   # its (direct sun per unit of DNI share, the sun's light)
+        self._no_window = np.zeros((0, 0), np.float32)
         self._dirty = []            # raster boxes of `_lit` changed since `_prepared` was made
         self._prepared = None       # the noise-free sensor stage of the frame at `_pose`
         self._dark = None           # the sensor stage of a frame without light
@@ -579,12 +580,9 @@ class RgbCamera:
         self._window_box = self._window_light = None
         if light is not None and self._attenuation > 0.0:
             rows, cols, lit = light
-            # exposure x (sky + attenuation x lit) / (1 + sky), rows from y_max
-            direct = np.float32(s.exposure * self._attenuation / (1.0 + s.diffuse_fraction))
-            window = np.flipud(lit) * direct
-            window += self._uniform - direct
-            # the texture's channels: its multiply then runs along whole rows
-            self._window_light = np.repeat(window[:, :, None], self._lit.image.shape[2], axis=2)
+            # exposure x (sky + attenuation x lit) / (1 + sky) = lit x direct + the rest
+            self._window_light = (np.ascontiguousarray(lit, dtype=np.float32), np.float32(
+                s.exposure * self._attenuation / (1.0 + s.diffuse_fraction)))
             self._window_box = (rows.start, rows.stop, cols.start, cols.stop)
         if not force:
             self.renders['light'] += 1
@@ -594,18 +592,9 @@ class RgbCamera:
 
     def _relight(self, box):
         """Redo the lit texture in raster `box` (r0, r1, c0, c1) and mark it changed."""
-        height = self._albedo.image.shape[0]
-        albedo, lit = self._albedo.image, self._lit.image
-        inside = _box_intersection(box, self._window_box)
-        for r0, r1, c0, c1 in _box_minus(box, inside):   # daylight alone
-            top = slice(height - r1, height - r0)
-            np.multiply(albedo[top, c0:c1], self._uniform, out=lit[top, c0:c1])
-        if inside is not None:
-            r0, r1, c0, c1 = inside
-            w0, w1, v0, v1 = self._window_box
-            top = slice(height - r1, height - r0)
-            np.multiply(albedo[top, c0:c1], self._window_light[w1 - r1:w1 - r0, c0 - v0:c1 - v0],
-                        out=lit[top, c0:c1])
+        window, direct = self._window_light or (self._no_window, np.float32(0.0))
+        relit_texture(self._albedo.image, self._lit.image, tuple(int(v) for v in box),
+                      self._uniform, window, self._window_box or (0, 0, 0, 0), direct)
         self._dirty.append(tuple(box))
 
     # ------------------------------------------------------------------ the frame

@@ -560,6 +560,32 @@ def bin_on_raster(points, power, x0, y0, pixel_size, c0, r0, out):
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
+def relit_texture(albedo, lit, box, uniform, window, window_box, direct):
+    """
+    Set `lit` = `albedo` x the light per unit, over raster `box` (r0, r1, c0, c1).
+
+    The textures (H, W, channels) run in rows from y_max: raster row r is texture row
+    H - 1 - r. The light is `uniform` (the daylight) outside raster `window_box` (same
+    form), and window[r - w0, c - v0] x `direct` + (`uniform` - `direct`) inside it
+    (`window`: the direct sun relative to the clear sun, rows from y_min; float32 scalars:
+    ``RgbCamera._set_window``'s light in one pass, without a per-channel copy).
+    """
+    height, channels = albedo.shape[0], albedo.shape[2]
+    r0, r1, c0, c1 = box
+    w0, w1, v0, v1 = window_box
+    offset = uniform - direct
+    for r in range(r0, r1):
+        t = height - 1 - r
+        in_rows = r >= w0 and r < w1
+        for c in range(c0, c1):
+            light = uniform
+            if in_rows and c >= v0 and c < v1:
+                light = window[r - w0, c - v0] * direct + offset
+            for k in range(channels):
+                lit[t, c, k] = albedo[t, c, k] * light
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
 def char_canvas(char, out):
     """
     Fill `out` uint8 (rows from y_max) with rint(255 (1 - chi)) of `char` (rows from y_min).
