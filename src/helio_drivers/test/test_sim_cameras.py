@@ -317,6 +317,16 @@ def test_compiled_table_read_out_equals_the_numpy_and_opencv_passes_it_replaced(
     part = light[5:30, 7:50]    # a part of a frame (not contiguous)
     level, _ = read_out.prepare(part, scale[5:30, 7:50])
     assert np.array_equal(level, read_out.prepare(part.copy(), scale[5:30, 7:50].copy())[0])
+    # written into a kept stage's parts: in place where rows are whole, else copied in
+    for rows, cols in ((slice(5, 30), slice(None)), (slice(5, 30), slice(7, 50))):
+        kept = (np.zeros(light.shape, np.float32), np.zeros(light.shape, np.float32))
+        views = (kept[0][rows, cols], kept[1][rows, cols])
+        filled = read_out.prepare(light[rows, cols], scale[rows, cols], out=views)
+        expected = read_out.prepare(light[rows, cols].copy(), scale[rows, cols].copy())
+        assert filled is views
+        assert np.array_equal(kept[0][rows, cols], expected[0])
+        assert np.array_equal(kept[1][rows, cols], expected[1])
+        assert not np.any(kept[0][:5]) and not np.any(kept[1][30:])
 
 
 def test_rays_binned_on_the_raster_window_equal_numpys_histogram():

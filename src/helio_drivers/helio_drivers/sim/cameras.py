@@ -273,12 +273,14 @@ class NoisyReadOut:
         """Return the table steps per unit of linear light (for `prepare`'s `scale`)."""
         return self.top * self.SUBCODES
 
-    def prepare(self, light, scale=None):
+    def prepare(self, light, scale=None, out=None):
         """
         Return (level, gain) float32 for linear `light` on the sensor (after the optics).
 
         `scale`: table steps per unit of light per pixel (`index_scale` x a gain the light
-        still needs, such as the vignetting: one pass for both), or None.
+        still needs, such as the vignetting: one pass for both), or None. `out`: (level,
+        gain) arrays of the light's shape to fill (views of a kept frame's stage: written in
+        place when they are contiguous), or None.
         """
         light = np.ascontiguousarray(light, dtype=np.float32)
         if scale is None:
@@ -286,14 +288,20 @@ class NoisyReadOut:
         else:
             scale = np.ascontiguousarray(np.broadcast_to(scale, light.shape),
                                          dtype=np.float32).reshape(-1)
-        level = np.empty(light.shape, np.float32)
-        gain = np.empty(light.shape, np.float32)
+        if out is not None and all(part.shape == light.shape and part.dtype == np.float32
+                                   and part.flags.c_contiguous for part in out):
+            level, gain = out
+        else:
+            level = np.empty(light.shape, np.float32)
+            gain = np.empty(light.shape, np.float32)
         if self._index is None or self._index.size < light.size:
             self._index = np.empty(light.size, np.int32)     # scratch, reused
         tone_table_read_out(light.reshape(-1), scale, np.float32(self.index_scale()),
                             self._last, self._level, self._gain, level.reshape(-1),
                             gain.reshape(-1), self._index)
-        return level, gain
+        if out is not None and level is not out[0]:
+            out[0][...], out[1][...] = level, gain
+        return out if out is not None else (level, gain)
 
     def draw(self, rng=None):
         """Return the noise of one frame: (bank frame, offset) drawn from `rng`."""
@@ -605,17 +613,18 @@ class RgbCamera:
             cv2.GaussianBlur(light, (0, 0), sigma, dst=light)
         return light
 
-    def _sensor_stage(self, light, rect):
+    def _sensor_stage(self, light, rect, out=None):
         """
         Return the prepared sensor stage of blurred `light`, the image's part `rect`.
 
         The vignetting (the optics' last step) goes with the linearised read-out's table
         index; the exact read-out gets the light vignetted (as ``Webcam.optics`` does).
+        `out`: the linearised read-out writes into these (level, gain) parts when it can.
         """
         x0, y0, x1, y1 = rect
         if self._read_out is not None:
             scale = None if self._index_scale is None else self._index_scale[y0:y1, x0:x1]
-            return self._read_out.prepare(light, scale)
+            return self._read_out.prepare(light, scale, out)
         vignette = self._webcam._vignette
         if vignette is not None:
             light = light * vignette[y0:y1, x0:x1]
@@ -661,11 +670,14 @@ class RgbCamera:
         """Redo the frame's sensor stage in `inner` (its light rendered over `wide`)."""
         part = self._blur(self._radiance(T_world_camera, self._lit, rect=wide))
         x0, y0, x1, y1 = inner
+        kept = tuple(None if stage is None else stage[y0:y1, x0:x1] for stage in self._prepared)
         first, second = self._sensor_stage(
-            part[y0 - wide[1]:y1 - wide[1], x0 - wide[0]:x1 - wide[0]], inner)
-        self._prepared[0][y0:y1, x0:x1] = first
-        if second is not None:
-            self._prepared[1][y0:y1, x0:x1] = second
+            part[y0 - wide[1]:y1 - wide[1], x0 - wide[0]:x1 - wide[0]], inner,
+            None if any(stage is None for stage in kept) else kept)
+        if first is not kept[0]:
+            kept[0][...] = first
+            if second is not None:
+                kept[1][...] = second
 
     def _radiance(self, T_world_camera, texture, rect=None):
         """
