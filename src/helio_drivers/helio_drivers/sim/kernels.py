@@ -45,43 +45,42 @@ def thomas_factors(lower, diagonal, upper, dt):
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
-def _explicit_terms(theta, dt_ay_ops, dt_az_ops, top_loss, dt_ay, dt_az):
+def _layer_explicit_terms(theta, k, dt_ay_ops, dt_az_ops, top_loss, dt_ay, dt_az):
     """
-    Fill dt_ay = dt Ay theta and dt_az = dt Az theta (Az with the surface loss), in place.
+    Fill dt_ay = dt Ay theta and dt_az = dt Az theta (Az with the surface loss) of layer k.
 
-    Adiabatic lateral ends; every boundary is its own loop, so the inner loops run along
-    whole contiguous rows with scalar coefficients.
+    `dt_ay`, `dt_az` (y, x): the layer's. Adiabatic lateral ends; every boundary is its
+    own loop, so the inner loops run along whole contiguous rows with scalar coefficients.
     """
     nz, ny, nx = theta.shape
     ay_lower, ay_diagonal, ay_upper = dt_ay_ops
     az_lower, az_diagonal, az_upper = dt_az_ops
-    for k in range(nz):
-        for j in range(ny):
-            d = ay_diagonal[j]
+    for j in range(ny):
+        d = ay_diagonal[j]
+        for i in range(nx):
+            dt_ay[j, i] = d * theta[k, j, i]
+        if j > 0:
+            lo = ay_lower[j]
             for i in range(nx):
-                dt_ay[k, j, i] = d * theta[k, j, i]
-            if j > 0:
-                lo = ay_lower[j]
-                for i in range(nx):
-                    dt_ay[k, j, i] += lo * theta[k, j - 1, i]
-            if j < ny - 1:
-                up = ay_upper[j]
-                for i in range(nx):
-                    dt_ay[k, j, i] += up * theta[k, j + 1, i]
-            d = az_diagonal[k]
+                dt_ay[j, i] += lo * theta[k, j - 1, i]
+        if j < ny - 1:
+            up = ay_upper[j]
             for i in range(nx):
-                dt_az[k, j, i] = d * theta[k, j, i]
-            if k > 0:
-                lo = az_lower[k]
-                for i in range(nx):
-                    dt_az[k, j, i] += lo * theta[k - 1, j, i]
-            else:
-                for i in range(nx):
-                    dt_az[0, j, i] -= top_loss[j, i] * theta[0, j, i]
-            if k < nz - 1:
-                up = az_upper[k]
-                for i in range(nx):
-                    dt_az[k, j, i] += up * theta[k + 1, j, i]
+                dt_ay[j, i] += up * theta[k, j + 1, i]
+        d = az_diagonal[k]
+        for i in range(nx):
+            dt_az[j, i] = d * theta[k, j, i]
+        if k > 0:
+            lo = az_lower[k]
+            for i in range(nx):
+                dt_az[j, i] += lo * theta[k - 1, j, i]
+        else:
+            for i in range(nx):
+                dt_az[j, i] -= top_loss[j, i] * theta[0, j, i]
+        if k < nz - 1:
+            up = az_upper[k]
+            for i in range(nx):
+                dt_az[j, i] += up * theta[k + 1, j, i]
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
@@ -101,24 +100,29 @@ def douglas_step(theta, out, dt_source, top_loss, dt_ay_ops, dt_az_ops, x_factor
     pivot with the loss. The scheme (Douglas and Gunn):
     (I - dt Ax) u1 = u + dt (Ay + Az) u + dt f; (I - dt Ay) u2 = u1 - dt Ay u;
     (I - dt Az) u3 = u2 - dt Az u; every solve the Thomas algorithm in double precision.
+
+    Everything but the z solve stays within a layer: a layer's explicit terms, its x and
+    y sweeps and its share of the z sweep's right-hand side are done one layer at a time,
+    in the core's cache (a 10 x 90 x 90 patch's whole-volume arrays, 0.65 MB each, do not
+    fit in it together); the same operations in the same order as whole-volume passes.
     """
     nz, ny, nx = theta.shape
     x_sub, x_eliminated, x_inverse = x_factors
     y_sub, y_eliminated, y_inverse = y_factors
     above, factor, z_inverse = z_elimination
-    dt_ay = np.empty_like(theta)
-    dt_az = np.empty_like(theta)
-    _explicit_terms(theta, dt_ay_ops, dt_az_ops, top_loss, dt_ay, dt_az)
-    # right-hand side of the x sweep: u + dt Ay u + dt Az u + dt f
+    dt_ay = np.empty((ny, nx))      # the layer's dt Ay u and dt Az u
+    dt_az = np.empty((ny, nx))
     for k in range(nz):
+        _layer_explicit_terms(theta, k, dt_ay_ops, dt_az_ops, top_loss, dt_ay, dt_az)
+        # right-hand side of the x sweep: u + dt Ay u + dt Az u + dt f
         for j in range(ny):
             for i in range(nx):
-                out[k, j, i] = theta[k, j, i] + dt_ay[k, j, i] + dt_az[k, j, i]
-    for j in range(ny):
-        for i in range(nx):
-            out[0, j, i] += dt_source[j, i]
-    # x sweep (lines along the contiguous axis: the lines of a layer advance together)
-    for k in range(nz):
+                out[k, j, i] = theta[k, j, i] + dt_ay[j, i] + dt_az[j, i]
+        if k == 0:
+            for j in range(ny):
+                for i in range(nx):
+                    out[0, j, i] += dt_source[j, i]
+        # x sweep (lines along the contiguous axis: the lines of a layer advance together)
         for j in range(ny):
             out[k, j, 0] *= x_inverse[0]
         for i in range(1, nx):
@@ -130,26 +134,25 @@ def douglas_step(theta, out, dt_source, top_loss, dt_ay_ops, dt_az_ops, x_factor
             eliminated = x_eliminated[i]
             for j in range(ny):
                 out[k, j, i] -= eliminated * out[k, j, i + 1]
-    # y sweep of u1 - dt Ay u
-    for k in range(nz):
+        # y sweep of u1 - dt Ay u
         inverse = y_inverse[0]
         for i in range(nx):
-            out[k, 0, i] = (out[k, 0, i] - dt_ay[k, 0, i]) * inverse
+            out[k, 0, i] = (out[k, 0, i] - dt_ay[0, i]) * inverse
         for j in range(1, ny):
             sub, inverse = y_sub[j], y_inverse[j]
             for i in range(nx):
-                out[k, j, i] = (out[k, j, i] - dt_ay[k, j, i] - sub * out[k, j - 1, i]) * inverse
+                out[k, j, i] = (out[k, j, i] - dt_ay[j, i] - sub * out[k, j - 1, i]) * inverse
         for r in range(ny - 1):
             j = ny - 2 - r
             eliminated = y_eliminated[j]
             for i in range(nx):
                 out[k, j, i] -= eliminated * out[k, j + 1, i]
-    # z sweep of u2 - dt Az u, eliminated from the bottom layer up (only the top row's
-    # pivot differs from column to column: the surface loss)
-    for k in range(nz):
+        # the z sweep's right-hand side: u2 - dt Az u
         for j in range(ny):
             for i in range(nx):
-                out[k, j, i] -= dt_az[k, j, i]
+                out[k, j, i] -= dt_az[j, i]
+    # z sweep, eliminated from the bottom layer up (only the top row's pivot differs from
+    # column to column: the surface loss)
     layer_max = np.empty(nz)
     if nz == 1:
         for j in range(ny):
