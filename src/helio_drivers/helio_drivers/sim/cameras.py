@@ -583,7 +583,7 @@ class RgbCamera:
     def _set_window(self, light, force=False):
         """Put the lens shadow and the focus of `light` into the texture (the old one out)."""
         s = self.settings
-        old = self._window_box
+        old, old_light = self._window_box, self._window_light
         self._light_source = light
         self._window_box = self._window_light = None
         if light is not None and self._attenuation > 0.0:
@@ -596,13 +596,23 @@ class RgbCamera:
             self.renders['light'] += 1
         boxes = [box for box in (None if force else old, self._window_box) if box is not None]
         for box in _merged_boxes(boxes):
-            self._relight(box)
+            # the texture holds the old window (or, forced, nothing to compare with)
+            self._relight(box, None if force else (old_light, old))
 
-    def _relight(self, box):
-        """Redo the lit texture in raster `box` (r0, r1, c0, c1) and mark it changed."""
-        window, direct = self._window_light or (self._no_window, np.float32(0.0))
+    def _relight(self, box, previous=None):
+        """
+        Redo the lit texture in raster `box` (r0, r1, c0, c1) and mark it changed.
+
+        `previous`: (window light, window box) the texture holds there now, under the same
+        daylight and albedo: only the pixels whose light changed are written. None: all.
+        """
+        no_window = (self._no_window, np.float32(0.0))
+        window, direct = self._window_light or no_window
+        old_window, old_direct = (previous[0] or no_window) if previous else no_window
+        old_box = previous[1] if previous and previous[1] else (0, 0, 0, 0)
         relit_texture(self._albedo.image, self._lit.image, tuple(int(v) for v in box),
-                      self._uniform, window, self._window_box or (0, 0, 0, 0), direct)
+                      self._uniform, window, self._window_box or (0, 0, 0, 0), direct,
+                      old_window, old_box, old_direct, previous is not None)
         self._dirty.append(tuple(box))
 
     # ------------------------------------------------------------------ the frame

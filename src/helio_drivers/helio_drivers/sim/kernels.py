@@ -563,7 +563,17 @@ def bin_on_raster(points, power, x0, y0, pixel_size, c0, r0, out):
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
-def relit_texture(albedo, lit, box, uniform, window, window_box, direct):
+def _window_light(r, c, uniform, window, window_box, direct):
+    """Return the light per unit of raster pixel (r, c): `relit_texture`'s rule."""
+    w0, w1, v0, v1 = window_box
+    if r >= w0 and r < w1 and c >= v0 and c < v1:
+        return window[r - w0, c - v0] * direct + (uniform - direct)
+    return uniform
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def relit_texture(albedo, lit, box, uniform, window, window_box, direct, previous,
+                  previous_box, previous_direct, changed_only):
     """
     Set `lit` = `albedo` x the light per unit, over raster `box` (r0, r1, c0, c1).
 
@@ -572,18 +582,19 @@ def relit_texture(albedo, lit, box, uniform, window, window_box, direct):
     form), and window[r - w0, c - v0] x `direct` + (`uniform` - `direct`) inside it
     (`window`: the direct sun relative to the clear sun, rows from y_min; float32 scalars:
     ``RgbCamera._set_window``'s light in one pass, without a per-channel copy).
+    `changed_only`: `lit` holds the albedo under the `previous` window (its box and
+    direct sun, the same daylight): only the pixels whose light differs are written (a
+    moving lens's window shifts by a few pixels between frames).
     """
     height, channels = albedo.shape[0], albedo.shape[2]
     r0, r1, c0, c1 = box
-    w0, w1, v0, v1 = window_box
-    offset = uniform - direct
     for r in range(r0, r1):
         t = height - 1 - r
-        in_rows = r >= w0 and r < w1
         for c in range(c0, c1):
-            light = uniform
-            if in_rows and c >= v0 and c < v1:
-                light = window[r - w0, c - v0] * direct + offset
+            light = _window_light(r, c, uniform, window, window_box, direct)
+            if changed_only and light == _window_light(r, c, uniform, previous,
+                                                       previous_box, previous_direct):
+                continue
             for k in range(channels):
                 lit[t, c, k] = albedo[t, c, k] * light
 
