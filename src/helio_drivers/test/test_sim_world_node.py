@@ -32,7 +32,8 @@ def test_sim_world_publishes_clock_cameras_canvas_and_truth_on_sim_time(tmp_path
                'info': graph.collect(CameraInfo, 'rgb/camera_info', qos_profile_sensor_data),
                'canvas': graph.collect(Image, 'sim/canvas', QoSProfile(depth=1)),
                'sun': graph.collect(Vector3Stamped, 'sim/truth/sun_direction', TRUTH_QOS),
-               'world': graph.collect(PoseStamped, 'sim/truth/world_pose', TRUTH_QOS)}
+               'world': graph.collect(PoseStamped, 'sim/truth/world_pose', TRUTH_QOS),
+               'rgb_pose': graph.collect(PoseStamped, 'sim/truth/rgb_pose', TRUTH_QOS)}
         for collector in got.values():
             collector.wait_for_count(3, timeout=60.0)
         got = {name: collector.messages for name, collector in got.items()}
@@ -61,6 +62,15 @@ def test_sim_world_publishes_clock_cameras_canvas_and_truth_on_sim_time(tmp_path
         assert np.degrees(math.acos(min(1.0, point_to_array(sun.vector) @ truth))) < 1e-6
         assert pose_to_matrix(got['world'][-1].pose) == pytest.approx(
             node.world.T_robot_world, abs=1e-12)
+        # the RGB optical frame in the world: T_world_robot T_robot_rgb of the rig at its
+        # joints (at rest: the emulators' start), restamped per frame, serialised per pose
+        rgb_pose = got['rgb_pose'][-1]
+        assert rgb_pose.header.frame_id == 'world'
+        assert stamp_to_seconds(rgb_pose.header.stamp) > stamp_to_seconds(
+            got['rgb_pose'][0].header.stamp)
+        rig_pose = node.world.rig.forward(node.devices.joint_positions())
+        assert pose_to_matrix(rgb_pose.pose) == pytest.approx(
+            np.linalg.inv(node.world.T_robot_world) @ rig_pose.T_robot_rgb, abs=1e-9)
     assert (tmp_path / 'out' / 'canvas.png').exists()
     assert (tmp_path / 'out' / 'dots.csv').exists()
 

@@ -272,6 +272,7 @@ class SimWorldNode(Node):
         self._next = {'rgb': 0.0, 'thermal': 0.0, 'canvas': 0.0, 'truth': 0.0}
         # published serialised, restamped: no message object per step
         self._clock_bytes = serialize_message(Clock())
+        self._rgb_pose_key = self._rgb_pose_serialized = None    # sim/truth/rgb_pose's
         max_lag = declare(
             self, 'pace_max_lag', 0.5,
             'How far behind its pace (real_time_factor, or lockstep_fallback_factor) the '
@@ -428,15 +429,23 @@ class SimWorldNode(Node):
             self._publish_frame(self._thermal_topics, self.world.thermal_image, stamp)
         if self._due('rgb', self.rgb_rate):
             self._publish_rgb(stamp)
-            truth = PoseStamped()
-            truth.header.stamp, truth.header.frame_id = stamp, 'world'
-            truth.pose = matrix_to_pose(self.world.camera_poses()[0])
-            self.truth_rgb_pub.publish(truth)
+            self.truth_rgb_pub.publish(restamped(self._rgb_pose_bytes(), stamp))
         if self._due('canvas', self.canvas_rate) and self.canvas_pub.get_subscription_count():
             self.canvas_pub.publish(serialized_image(self.world.canvas_image(), 'mono8', stamp,
                                                      'world'))
         if self._due('truth', 1.0 / self.truth_period):
             self._publish_truth(stamp)
+
+    def _rgb_pose_bytes(self):
+        """Return the true RGB pose's PoseStamped serialised (once per pose: restamp it)."""
+        T_world_rgb = self.world.camera_poses()[0]
+        key = T_world_rgb.tobytes()
+        if key != self._rgb_pose_key:
+            truth = PoseStamped()
+            truth.header.frame_id = 'world'
+            truth.pose = matrix_to_pose(T_world_rgb)
+            self._rgb_pose_serialized, self._rgb_pose_key = serialize_message(truth), key
+        return self._rgb_pose_serialized
 
     def _publish_frame(self, camera, render, stamp):
         """Publish a camera's CameraInfo, and its image when someone subscribes to it."""
