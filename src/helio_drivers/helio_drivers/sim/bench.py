@@ -27,8 +27,12 @@ process at ``real_time_factor`` 0 with this process subscribed to both cameras a
 process drives the emulated Dobot and Maestro over their pseudo-terminals as the drivers
 would: each device's joints read at 20 Hz of wall time (their ``joint_states``), a running
 move polled as the drivers poll it (the arm's alarms, pose and executed index, the servos'
-moving state and positions), but at every turn of the probe's loop, not every 20 ms: the
-next move starts at once, so the lens moves all the time however fast the world runs.
+moving state and positions, every 20 ms of wall time: ``device_action_node``'s
+``poll_period``), and at every turn of the probe's loop the arm's executed index and the
+servos' moving state (two round trips): the next move starts at once, as the painter starts
+it, so the lens moves all the time however fast the world runs. (Until this session's last
+change the whole drivers' poll ran at every turn, hundreds of times a second: the
+emulators then took 8 ms of CPU per simulated second; SIMULATION.md.)
 ``sim_node_heating_*`` holds the lens on a dot, ``sim_node_moving_*`` commands the next of
 two dots as soon as the last move ended; CPU is the node process's (``/proc``), and
 ``sim_node_*_rgb_hz`` / ``_thermal_hz`` count the frames received per simulated second.
@@ -72,6 +76,7 @@ RETREAT = 0.03        # [m]
 N_P_TARGET = 30
 DDS_PROFILE_ENV = 'FASTRTPS_DEFAULT_PROFILES_FILE'
 JOINT_STATE_RATE = 20.0   # [Hz wall] each driver's joint_states (device_action_node)
+MOVE_POLL_PERIOD = 0.02   # [s wall] the drivers' polling of a running move (poll_period)
 
 
 def _rig():
@@ -328,20 +333,20 @@ class NodeRun:
         for channel in (self.calibrations.yaw_channel, self.calibrations.pitch_channel):
             self.servo.get_position(channel)
 
-    def poll_move(self, index):
-        """Poll a move as the drivers' device threads do; tell whether both arrived."""
+    def poll_move(self):
+        """Poll a running move as the drivers' device threads do (every poll_period)."""
         self.dobot.get_alarms()
-        arm = self.dobot.executed_index() >= index
-        wrist = not self.servo.moving()
+        self.dobot.executed_index()
+        self.servo.moving()
         self.read_joints()      # the arm's pose and the servos' positions
-        return arm and wrist
 
     def measure(self, wall_seconds, between=None):
         """
         Return (simulated, wall, node cpu, frames) over `wall_seconds`.
 
         The joints are read as the drivers' joint_states read them (every
-        1 / JOINT_STATE_RATE of wall time); `between` (a move's polling) runs at every turn.
+        1 / JOINT_STATE_RATE of wall time); with `between` (the next move's start, at every
+        turn) a move is polled as the drivers poll it, every MOVE_POLL_PERIOD.
         """
         self.spin(0.3)
         deadline = time.monotonic() + 30.0
@@ -353,7 +358,7 @@ class NodeRun:
             time.monotonic()
         counts0 = dict(self.counts)
         end = wall0 + wall_seconds
-        next_joints = wall0
+        next_joints = next_poll = wall0
         while True:
             now = time.monotonic()
             if now >= end:
@@ -362,6 +367,9 @@ class NodeRun:
                 self.read_joints()
                 next_joints += 1.0 / JOINT_STATE_RATE
             if between is not None:
+                if now >= next_poll:
+                    self.poll_move()
+                    next_poll += MOVE_POLL_PERIOD
                 between()
             wait = 0.01 if between is not None else min(next_joints, end) - now
             self.executor.spin_once(timeout_sec=max(wait, 0.0))
@@ -411,7 +419,7 @@ def bench_node(rig_file, wall_seconds, busy):
                     state = {'k': 0, 'index': run.command(focus[1])}
 
                     def keep_moving():
-                        if run.poll_move(state['index']):
+                        if run.arrived(state['index']):
                             state['k'] ^= 1
                             state['index'] = run.command(focus[state['k']])
                     moving = run.measure(wall_seconds, keep_moving)
