@@ -44,43 +44,48 @@ def thomas_factors(lower, diagonal, upper, dt):
     return sub, eliminated, inverse_pivot
 
 
+@numba.njit(cache=True, nogil=True, error_model='numpy', inline='always')
+def _scaled_row(out, coefficient, row):
+    """Set the row `out` = `coefficient` x `row` (1-D, one contiguous pass)."""
+    for i in range(out.shape[0]):
+        out[i] = coefficient * row[i]
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy', inline='always')
+def _add_scaled_row(out, coefficient, row):
+    """Add `coefficient` x `row` to the row `out` (1-D, one contiguous pass)."""
+    for i in range(out.shape[0]):
+        out[i] += coefficient * row[i]
+
+
 @numba.njit(cache=True, nogil=True, error_model='numpy')
 def _layer_explicit_terms(theta, k, dt_ay_ops, dt_az_ops, top_loss, dt_ay, dt_az):
     """
     Fill dt_ay = dt Ay theta and dt_az = dt Az theta (Az with the surface loss) of layer k.
 
-    `dt_ay`, `dt_az` (y, x): the layer's. Adiabatic lateral ends; every boundary is its
-    own loop, so the inner loops run along whole contiguous rows with scalar coefficients.
+    `dt_ay`, `dt_az` (y, x): the layer's. Each is the three-point stencil of its axis,
+    applied row by row (y: the rows j - 1, j, j + 1 of layer k; z: row j of the layers
+    k - 1, k, k + 1). The stencil has no neighbour beyond the lateral ends (adiabatic) and
+    the bottom layer; the top layer adds the surface loss. The helpers inline: the same
+    loops and speed as writing each row's loop out.
     """
     nz, ny, nx = theta.shape
     ay_lower, ay_diagonal, ay_upper = dt_ay_ops
     az_lower, az_diagonal, az_upper = dt_az_ops
     for j in range(ny):
-        d = ay_diagonal[j]
-        for i in range(nx):
-            dt_ay[j, i] = d * theta[k, j, i]
+        _scaled_row(dt_ay[j], ay_diagonal[j], theta[k, j])
         if j > 0:
-            lo = ay_lower[j]
-            for i in range(nx):
-                dt_ay[j, i] += lo * theta[k, j - 1, i]
+            _add_scaled_row(dt_ay[j], ay_lower[j], theta[k, j - 1])
         if j < ny - 1:
-            up = ay_upper[j]
-            for i in range(nx):
-                dt_ay[j, i] += up * theta[k, j + 1, i]
-        d = az_diagonal[k]
-        for i in range(nx):
-            dt_az[j, i] = d * theta[k, j, i]
+            _add_scaled_row(dt_ay[j], ay_upper[j], theta[k, j + 1])
+        _scaled_row(dt_az[j], az_diagonal[k], theta[k, j])
         if k > 0:
-            lo = az_lower[k]
-            for i in range(nx):
-                dt_az[j, i] += lo * theta[k - 1, j, i]
+            _add_scaled_row(dt_az[j], az_lower[k], theta[k - 1, j])
         else:
             for i in range(nx):
                 dt_az[j, i] -= top_loss[j, i] * theta[0, j, i]
         if k < nz - 1:
-            up = az_upper[k]
-            for i in range(nx):
-                dt_az[j, i] += up * theta[k + 1, j, i]
+            _add_scaled_row(dt_az[j], az_upper[k], theta[k + 1, j])
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
