@@ -422,7 +422,7 @@ class RgbCamera:
         self._dirty = []            # raster boxes of `_lit` changed since `_prepared` was made
         self._prepared = None       # the noise-free sensor stage of the frame at `_pose`
         self._dark = None           # the sensor stage of a frame without light
-        self._lit_rect = None       # the image rectangle `_prepared` may be lit in
+        self._lit_rect = (0, 0, 0, 0)   # the image rectangle `_prepared` may be lit in
         self._pose = None
         self._view = None           # per-pose geometry (`_pose_view`)
         self._view_key = None
@@ -653,7 +653,6 @@ class RgbCamera:
         dark = self._dark_stage()
         if self._prepared is None:
             self._prepared = tuple(None if part is None else part.copy() for part in dark)
-            self._lit_rect = (0, 0, 0, 0)
         x_min, x_max, y_min, y_max = self.extent
         seen = self._image_rect(T_world_camera, (x_min, x_max, y_min, y_max))
         rect = (0, 0, 0, 0) if seen is None else seen[1]
@@ -782,10 +781,6 @@ class RgbCamera:
         cell = self.pixel_size
         return (x_min + c0 * cell, x_min + c1 * cell, y_min + r0 * cell, y_min + r1 * cell)
 
-    def _context_margin(self):
-        """Return the pixels of context around a part of the image that its blur needs."""
-        return self._webcam.blur_margin() + 2
-
     def _image_rect(self, T_world_camera, box):
         """
         Return (wide, inner) image rectangles (x0, y0, x1, y1) [px] of a ground box, or None.
@@ -804,7 +799,7 @@ class RgbCamera:
             homogeneous = corners @ project.T
             if np.all(homogeneous[:, 2] > 0.0):
                 pixels = homogeneous[:, :2] / homogeneous[:, 2:]
-        margin = self._context_margin()
+        margin = self._webcam.blur_margin() + 2
         if pixels is None:
             inner = (0, 0, width, height)
         else:
