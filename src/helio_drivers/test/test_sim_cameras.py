@@ -296,9 +296,10 @@ def test_compiled_table_read_out_equals_the_numpy_and_opencv_passes_it_replaced(
     rng = np.random.default_rng(5)
     light = rng.uniform(-0.1, 1.5, (settings.height, settings.width, 3)).astype(np.float32)
     light[0, 0] = np.nan
-    scale = (rng.uniform(0.8, 1.0, light.shape) * read_out.index_scale()).astype(np.float32)
+    scale = (rng.uniform(0.8, 1.0, light.shape[:2]) * read_out.index_scale()).astype(np.float32)
     for per_pixel in (scale, None):
-        index = (np.multiply(light, per_pixel, dtype=np.float32) if per_pixel is not None
+        index = (np.multiply(light, per_pixel[:, :, None], dtype=np.float32)
+                 if per_pixel is not None
                  else light * np.float32(read_out.index_scale()))
         index = np.nan_to_num(index, nan=0.0)
         np.clip(index, 0.0, float(read_out._last), out=index)
@@ -317,7 +318,15 @@ def test_compiled_table_read_out_equals_the_numpy_and_opencv_passes_it_replaced(
     part = light[5:30, 7:50]    # a part of a frame (not contiguous)
     level, _ = read_out.prepare(part, scale[5:30, 7:50])
     assert np.array_equal(level, read_out.prepare(part.copy(), scale[5:30, 7:50].copy())[0])
-    # written into a kept stage's parts: in place where rows are whole, else copied in
+    # a warp's padding channel after the colours is not read
+    padded = np.concatenate([light, np.full(light.shape[:2] + (1,), np.nan, np.float32)],
+                            axis=2)
+    for got, expected in zip(read_out.prepare(padded[3:40], scale[3:40]),
+                             read_out.prepare(light[3:40], scale[3:40])):
+        assert np.array_equal(got, expected)
+    with pytest.raises(ValueError, match='light must be'):
+        read_out.prepare(light[:, :, :2])
+    # written in place into a kept stage's parts, whole rows or not
     for rows, cols in ((slice(5, 30), slice(None)), (slice(5, 30), slice(7, 50))):
         kept = (np.zeros(light.shape, np.float32), np.zeros(light.shape, np.float32))
         views = (kept[0][rows, cols], kept[1][rows, cols])

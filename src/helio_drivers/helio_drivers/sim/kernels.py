@@ -196,26 +196,33 @@ def douglas_step(theta, out, dt_source, top_loss, dt_ay_ops, dt_az_ops, x_factor
 def tone_table_read_out(light, scale, uniform_scale, last, level_table, gain_table, level,
                         gain, index):
     """
-    Fill `level` and `gain` float32 from tables indexed by light (NoisyReadOut), flat.
+    Fill `level` and `gain` (h, w, 3) float32 from tables indexed by light (NoisyReadOut).
 
-    Per element, in single precision as numpy's passes did it: index = light x scale (or x
+    `light` (h, w, channels >= 3): the first three channels are read (a warp's padding
+    channel is skipped, not copied away). Per element, in single precision as numpy's
+    passes did it: index = light x scale[r, c] (the pixel's: the vignetting; or x
     `uniform_scale` when `scale` is empty), clipped to [0, last] (NaN to 0), + 0.5,
-    truncated; then level = level_table[index], gain = gain_table[index]. Two passes
-    (the index into the int32 scratch `index`, vectorised; then the look-ups) instead of
-    numpy's six.
+    truncated; then level = level_table[index], gain = gain_table[index]. Row by row: the
+    indices into the int32 scratch `index` (3 w, stays in the cache; vectorised), then
+    the look-ups. Any strides: `level` and `gain` may be views of a kept frame's stage.
     """
     uniform = scale.shape[0] == 0
     top = np.float32(last)
     half = np.float32(0.5)
     zero = np.float32(0.0)
-    for p in range(light.shape[0]):
-        value = light[p] * (uniform_scale if uniform else scale[p])
-        value = value if value > zero else zero      # NaN too
-        value = value if value < top else top
-        index[p] = np.int32(value + half)
-    for p in range(light.shape[0]):
-        level[p] = level_table[index[p]]
-        gain[p] = gain_table[index[p]]
+    height, width = level.shape[0], level.shape[1]
+    for r in range(height):
+        for c in range(width):
+            factor = uniform_scale if uniform else scale[r, c]
+            for k in range(3):
+                value = light[r, c, k] * factor
+                value = value if value > zero else zero      # NaN too
+                value = value if value < top else top
+                index[3 * c + k] = np.int32(value + half)
+        for c in range(width):
+            for k in range(3):
+                level[r, c, k] = level_table[index[3 * c + k]]
+                gain[r, c, k] = gain_table[index[3 * c + k]]
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
