@@ -203,26 +203,32 @@ def tone_table_read_out(light, scale, uniform_scale, last, level_table, gain_tab
     passes did it: index = light x scale[r, c] (the pixel's: the vignetting; or x
     `uniform_scale` when `scale` is empty), clipped to [0, last] (NaN to 0), + 0.5,
     truncated; then level = level_table[index], gain = gain_table[index]. Row by row: the
-    indices into the int32 scratch `index` (3 w, stays in the cache; vectorised), then
-    the look-ups. Any strides: `level` and `gain` may be views of a kept frame's stage.
+    indices into the int32 scratch `index` (3 w: it stays in the cache), then the
+    look-ups. Any strides: `level` and `gain` may be views of a kept frame's stage.
     """
     uniform = scale.shape[0] == 0
     top = np.float32(last)
-    half = np.float32(0.5)
-    zero = np.float32(0.0)
     height, width = level.shape[0], level.shape[1]
     for r in range(height):
+        row = light[r]
         for c in range(width):
             factor = uniform_scale if uniform else scale[r, c]
-            for k in range(3):
-                value = light[r, c, k] * factor
-                value = value if value > zero else zero      # NaN too
-                value = value if value < top else top
-                index[3 * c + k] = np.int32(value + half)
+            index[3 * c] = _table_index(row[c, 0] * factor, top)
+            index[3 * c + 1] = _table_index(row[c, 1] * factor, top)
+            index[3 * c + 2] = _table_index(row[c, 2] * factor, top)
+        level_row, gain_row = level[r], gain[r]
         for c in range(width):
             for k in range(3):
-                level[r, c, k] = level_table[index[3 * c + k]]
-                gain[r, c, k] = gain_table[index[3 * c + k]]
+                level_row[c, k] = level_table[index[3 * c + k]]
+                gain_row[c, k] = gain_table[index[3 * c + k]]
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy', inline='always')
+def _table_index(value, top):
+    """Return int32(`value` clipped to [0, `top`] (NaN to 0) + 0.5), float32 throughout."""
+    value = value if value > np.float32(0.0) else np.float32(0.0)      # NaN too
+    value = value if value < top else top
+    return np.int32(value + np.float32(0.5))
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
