@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 import math
 
 from helio_drivers.sim.kernels import (bin_points, carried_points, points_summary, shadow_grid,
-                                       shadow_samples)
+                                       shadow_shares)
 from helio_optics.geometry import invert_transform
 from helio_optics.lens import (area_samples, LensParameters, pmma_index, SOLAR_BANDS,
                                trace_bands)
@@ -384,24 +384,14 @@ def shadow_fractions(field, x_edges, y_edges, samples=3):
     The shadow is convex: a cell whose four corners are in it is in it, and one whose
     corners are all out and whose neighbours' corners are all out too is out of it (the
     shadow, the aperture's size, is far larger than a cell); only the cells along its
-    edge are sampled (``kernels.shadow_samples``).
+    edge are sampled (``kernels.shadow_shares``, one compiled pass).
     """
-    corners = field.in_shadow_grid(x_edges, y_edges)                   # (ny + 1, nx + 1)
-    inside = corners[:-1, :-1] & corners[:-1, 1:] & corners[1:, :-1] & corners[1:, 1:]
-    outside = ~(corners[:-1, :-1] | corners[:-1, 1:] | corners[1:, :-1] | corners[1:, 1:])
-    edge = ~(inside | outside)
-    near = edge.copy()                        # the edge cells and their eight neighbours
-    near[1:] |= edge[:-1]
-    near[:-1] |= edge[1:]
-    near[:, 1:] |= near[:, :-1].copy()
-    near[:, :-1] |= near[:, 1:].copy()
-    shadow = inside.astype(float)
-    rows, cols = np.nonzero(near)
+    x_edges = np.ascontiguousarray(x_edges, dtype=float)
+    y_edges = np.ascontiguousarray(y_edges, dtype=float)
+    shadow = np.zeros((len(y_edges) - 1, len(x_edges) - 1))
     form = field._shadow_form()
-    if rows.size and form is not None:
-        shadow_samples(np.ascontiguousarray(x_edges, dtype=float),
-                       np.ascontiguousarray(y_edges, dtype=float), rows, cols, form,
-                       int(samples), shadow)
+    if form is not None:
+        shadow_shares(x_edges, y_edges, form, int(samples), shadow)
     return shadow
 
 

@@ -476,28 +476,60 @@ def points_summary(points, power):
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
-def shadow_samples(x_edges, y_edges, rows, cols, form, samples, out):
+def _cell_shadow_share(x_edges, y_edges, row, col, form, samples):
     """
-    Set out[rows[q], cols[q]] to the share of the cell's samples^2 points in the shadow.
+    Return the share of cell (row, col)'s samples^2 points in the lens shadow.
 
     The points are at the fractions (k + 0.5) / samples of each cell side; the test is
     ``shadow_grid``'s (the same arithmetic).
     """
     aa, ab2, bb, ac2, bc2, cc, r2, d0, n0, n1, denominator = form
-    for q in range(rows.shape[0]):
-        row, col = rows[q], cols[q]
-        x0, width = x_edges[col], x_edges[col + 1] - x_edges[col]
-        y0, height = y_edges[row], y_edges[row + 1] - y_edges[row]
-        count = 0
-        for a in range(samples):
-            y = y0 + ((a + 0.5) / samples) * height
-            for b in range(samples):
-                x = x0 + ((b + 0.5) / samples) * width
-                radial2 = aa * x * x + ab2 * x * y + bb * y * y + ac2 * x + bc2 * y + cc
-                distance = (d0 - n0 * x - n1 * y) / denominator
-                if distance > 0.0 and radial2 <= r2:
-                    count += 1
-        out[row, col] = count / (samples * samples)
+    x0, width = x_edges[col], x_edges[col + 1] - x_edges[col]
+    y0, height = y_edges[row], y_edges[row + 1] - y_edges[row]
+    count = 0
+    for a in range(samples):
+        y = y0 + ((a + 0.5) / samples) * height
+        for b in range(samples):
+            x = x0 + ((b + 0.5) / samples) * width
+            radial2 = aa * x * x + ab2 * x * y + bb * y * y + ac2 * x + bc2 * y + cc
+            distance = (d0 - n0 * x - n1 * y) / denominator
+            if distance > 0.0 and radial2 <= r2:
+                count += 1
+    return count / (samples * samples)
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def shadow_shares(x_edges, y_edges, form, samples, out):
+    """
+    Fill `out` (ny, nx): each cell's share of the lens shadow (``flux.shadow_fractions``).
+
+    The shadow is convex and far larger than a cell: a cell whose four corners are in it
+    is in it (1), one whose corners are out and whose eight neighbours' corners are out too
+    is out of it (0); the cells along its edge and their neighbours get the share of their
+    samples^2 points in it (``_cell_shadow_share``). The corners by ``shadow_grid``'s test:
+    the numpy passes over the corner grid it replaced (0.13 ms a step), in one.
+    """
+    ny, nx = out.shape
+    corners = np.zeros((ny + 1, nx + 1), np.bool_)
+    shadow_grid(x_edges, y_edges, form, corners)
+    edge = np.zeros((ny, nx), np.bool_)
+    for r in range(ny):
+        for c in range(nx):
+            count = (int(corners[r, c]) + int(corners[r, c + 1]) + int(corners[r + 1, c])
+                     + int(corners[r + 1, c + 1]))
+            edge[r, c] = 0 < count < 4
+            out[r, c] = 1.0 if count == 4 else 0.0
+    near = np.zeros((ny, nx), np.bool_)     # the edge cells and their eight neighbours
+    for r in range(ny):
+        for c in range(nx):
+            if edge[r, c]:
+                for dr in range(max(r - 1, 0), min(r + 2, ny)):
+                    for dc in range(max(c - 1, 0), min(c + 2, nx)):
+                        near[dr, dc] = True
+    for r in range(ny):
+        for c in range(nx):
+            if near[r, c]:
+                out[r, c] = _cell_shadow_share(x_edges, y_edges, r, c, form, samples)
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
