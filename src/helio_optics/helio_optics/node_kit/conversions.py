@@ -161,6 +161,28 @@ def serialized_image(array, encoding, stamp, frame_id='', is_bigendian=False, st
     return b''.join(writer.parts)
 
 
+def serialized_pose_stamped(transform, stamp, frame_id=''):
+    """
+    Return the geometry_msgs/PoseStamped of a 4x4 rigid transform, serialised.
+
+    The bytes ``rclpy.serialization.serialize_message`` gives for the message of
+    ``matrix_to_pose`` (tested), written directly as ``serialized_image`` writes its
+    Image: a pose that changes every frame (a camera on the moving arm) costs a fifth of
+    building the message and serialising it (0.15 ms). `stamp` is a
+    builtin_interfaces/Time.
+    """
+    if sys.byteorder != 'little':
+        raise RuntimeError('serialized_pose_stamped writes little-endian CDR on little-endian '
+                           'hosts only; publish a PoseStamped instead')
+    transform = np.asarray(transform, dtype=float)
+    writer = _CdrWriter()
+    writer.add(_CDR_TIME, stamp.sec, stamp.nanosec)
+    writer.add_string(frame_id)
+    writer.add('<ddd', *(float(v) for v in transform[:3, 3]))
+    writer.add('<dddd', *(float(v) for v in quaternion_from_matrix(transform[:3, :3])))
+    return b''.join(writer.parts)
+
+
 def restamped(serialized, stamp):
     """
     Return a serialised message whose first field is its stamp, with `stamp` there instead.
@@ -190,7 +212,7 @@ class _CdrWriter:
         self._offset = 0       # from the end of the encapsulation header
 
     def add(self, layout, *values):
-        """Add `values` packed by struct `layout` (one field size: 1 or 4 bytes)."""
+        """Add `values` packed by struct `layout` (one field size: 1, 4 or 8 bytes)."""
         size = struct.calcsize(layout[1:2])
         padding = -self._offset % size
         data = b'\0' * padding + struct.pack(layout, *values)
