@@ -50,6 +50,32 @@ def test_the_world_is_deterministic_for_a_seed():
     assert np.array_equal(images[0][1], images[1][1])
 
 
+def test_within_one_instant_the_joint_source_is_read_once_for_the_step_and_its_outputs():
+    world = SimWorld(FAST, rig_parameters())
+    start = true_sun_focus_joints(world, [0.07, 0.07, 0.0], 0.082)
+    reads = []
+
+    def drifting_joints():      # an arm that moves between any two reads
+        reads.append(start + 0.002 * len(reads))
+        return reads[-1]
+    world.attach_joint_source(drifting_joints)
+    with world.one_instant():
+        world.step()
+        poses = world.camera_poses()
+        frame = world.stage_rgb_frame()
+        world.thermal_image()
+        assert len(reads) == 1 and np.array_equal(world.joint_positions(), reads[0])
+    # the outputs are those of the joints read at the step, by the rig's own kinematics
+    expected = world.rig.forward(reads[0])
+    assert np.allclose(poses[0], world.T_world_robot @ expected.T_robot_rgb)
+    assert np.allclose(poses[1], world.T_world_robot @ expected.T_robot_thermal)
+    frame()
+    # outside it, every read asks the source again
+    world.camera_poses()
+    world.camera_poses()
+    assert len(reads) == 3 and np.array_equal(world.joint_positions(), reads[3])
+
+
 def test_a_held_focus_chars_a_dot_written_to_the_canvas_outputs(tmp_path):
     world = SimWorld(FAST, rig_parameters())
     world.set_joints(true_sun_focus_joints(world, [0.07, 0.05, 0.0], 0.082))

@@ -14,6 +14,7 @@ Nothing here tells the controller what it wants to know: the robot's heading, th
 the lens focus are only visible through the images, as on the real rig.
 """
 
+import contextlib
 from dataclasses import dataclass, field, fields, replace
 import datetime
 import math
@@ -190,6 +191,7 @@ class SimWorld:
                              s.marker_id, s.marker_dictionary, seed=s.seed)
         self._rng = np.random.default_rng(s.seed)
         self._joints_source = joints
+        self._holding_joints = self._joints_held = False     # one_instant
         self._x = np.array([0.0, math.radians(30.0), math.radians(30.0), 0.0, 0.0])
         self._sun_ray = None
         self._sun_ray_time = -math.inf
@@ -225,10 +227,26 @@ class SimWorld:
         self._x = np.asarray(x, dtype=float).reshape(5).copy()
 
     def joint_positions(self):
-        """Return x (5,) [rad] of the rig now."""
-        if self._joints_source is not None:
+        """Return x (5,) [rad] of the rig now (within ``one_instant``: as first read there)."""
+        if self._joints_source is not None and not self._joints_held:
             self._x = np.asarray(self._joints_source(), dtype=float).reshape(5)
+            self._joints_held = self._holding_joints
         return self._x.copy()
+
+    @contextlib.contextmanager
+    def one_instant(self):
+        """
+        Read the joint source once for all that the block does: a step and its outputs.
+
+        The step's flux and the frames and truths published after it are then of one
+        instant of the devices (a command the emulators take meanwhile counts from the next
+        step on), and the emulators are read once a step instead of three to five times.
+        """
+        self._holding_joints, self._joints_held = True, False
+        try:
+            yield self
+        finally:
+            self._holding_joints = self._joints_held = False
 
     def pose(self):
         """Return the RigPose (robot-frame transforms) at the present joints."""
