@@ -59,6 +59,7 @@ from dataclasses import dataclass
 import threading
 import time
 
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped, PoseStamped, Vector3, Vector3Stamped
 from helio_drivers.sim.clock import Lockstep, Pacer
 from helio_drivers.sim.devices import DeviceSettings, SimDevices
@@ -67,7 +68,8 @@ from helio_drivers.sim.world import flat_settings, settings_from_flat, SimSettin
 from helio_msgs.msg import LightTruth, ThermalStats
 from helio_optics.node_kit.conversions import array_to_point, camera_info_from_camera
 from helio_optics.node_kit.conversions import matrix_to_pose, restamped
-from helio_optics.node_kit.conversions import serialized_image, stamp_to_seconds
+from helio_optics.node_kit.conversions import serialized_image, serialized_pose_stamped
+from helio_optics.node_kit.conversions import stamp_to_seconds
 from helio_optics.node_kit.deployment import rig_file_or_default, RIG_FILE_PARAMETER
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
@@ -384,10 +386,11 @@ class SimWorldNode(Node):
             if delay > 0.0 and self._stop.wait(delay):
                 break
             try:
-                self.world.step()
-                if not self.context.ok():
-                    break
-                self._publish_due()
+                with self.world.one_instant():
+                    self.world.step()
+                    if not self.context.ok():
+                        break
+                    self._publish_due()
             except Exception as error:  # keep simulating; a broken frame is logged
                 if not self.context.ok():
                     break
@@ -441,10 +444,8 @@ class SimWorldNode(Node):
         T_world_rgb = self.world.camera_poses()[0]
         key = T_world_rgb.tobytes()
         if key != self._rgb_pose_key:
-            truth = PoseStamped()
-            truth.header.frame_id = 'world'
-            truth.pose = matrix_to_pose(T_world_rgb)
-            self._rgb_pose_serialized, self._rgb_pose_key = serialize_message(truth), key
+            self._rgb_pose_serialized = serialized_pose_stamped(T_world_rgb, Time(), 'world')
+            self._rgb_pose_key = key
         return self._rgb_pose_serialized
 
     def _publish_frame(self, camera, render, stamp):
