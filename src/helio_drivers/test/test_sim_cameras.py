@@ -363,7 +363,7 @@ def test_ground_light_by_homography_equals_casting_every_pixel_ray():
         warped = camera._radiance(pose, texture)
         cast = camera._renderer.radiance(pose, texture, background=0.0)[:, :, :3]
         difference = np.abs(warped - cast)
-        # both sample bilinearly at 1/32 px; they differ where that rounding differs
+        # both sample bilinearly at their float coordinates, which round differently
         assert difference.mean() < 2e-3 and difference.max() < 0.05
         part = camera._radiance(pose, texture, rect=(100, 50, 300, 200))
         assert np.abs(part - warped[50:200, 100:300]).max() < 0.05

@@ -174,7 +174,8 @@ def test_kept_rgb_frames_of_a_painting_equal_a_straightforward_render(noise):
 
     Along a dot heated until it chars, under a cloud, after a move that re-centres the heat
     patch and while the next dot heats: the same frames within the ray cast's and the
-    homography's different bilinear rounding (both at 1/32 px): at most a level apart. With
+    homography's different rounding of the sample points (OpenCV 5 samples both at the
+    float coordinates): at most a level apart. With
     noise, the same noise (the same draws) on the same light.
     """
     settings = SimSettings()
