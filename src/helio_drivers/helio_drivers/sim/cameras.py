@@ -626,7 +626,8 @@ class RgbCamera:
 
         The vignetting (the optics' last step) goes with the linearised read-out's table
         index; the exact read-out gets the light vignetted (as ``Webcam.optics`` does).
-        `out`: the linearised read-out writes into these (level, gain) parts when it can.
+        `out`: the (level, gain) parts of the kept stage the linearised read-out writes
+        into (and returns); the exact read-out returns new arrays.
         """
         x0, y0, x1, y1 = rect
         if self._read_out is not None:
