@@ -53,6 +53,7 @@ import traceback
 
 from geometry_msgs.msg import PointStamped
 from helio_control.dot_cycle import CycleSettings, Decision, DotCycle
+from helio_control.driver_silence import DriverSilence
 from helio_control.picture_input import picture_from_image_msg, PictureError
 from helio_control.plan import options_from_goal, Plan, plan_dots, plan_picture
 from helio_control.plan import PlanError, PlanOptionsError
@@ -78,6 +79,9 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 RELIABLE = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE)
 COOLING_RULES = ('paper', 'window')
 # Goal fields that do not change what is painted (a resumed goal may differ in them).
+# a steady tick this late says the painter itself did not run (DriverSilence): at most this,
+# and at most half device_silence [s wall]
+LONGEST_RUN_GAP = 0.5
 NOT_THE_PICTURE = ('run_dir', 'fresh', 'start_index', 'dry_run')
 
 
@@ -203,8 +207,9 @@ class PainterNode(Node):
             'the working directory).')))
         self.device_silence = declare(
             self, 'device_silence', 1.0,
-            'A driver whose joint states stopped this long (wall clock) is a device fault '
-            'while heating [s].', 0.1, 60.0)
+            'A driver whose joint states stopped this long (wall clock, not counting time in '
+            'which the painter itself did not run) is a device fault while heating [s].',
+            0.1, 60.0)
         self.wrist_turn = declare(self, 'wrist_escape_pitch', 0.6,
                                   'If the arm cannot retreat, turn the lens pitch by this to '
                                   'put the focus off the wood [rad].', 0.05, 1.5)
@@ -232,7 +237,11 @@ class PainterNode(Node):
         self.create_subscription(SpotObservation, 'spot', self._on_spot, RELIABLE)
         for device in ('dobot', 'servo'):
             self.create_subscription(DeviceStatus, f'{device}/status', self._on_status, LATCHED)
-        self.heard = {}                    # device -> wall time of its last joint state
+        # the drivers' joint states on the wall clock, the painter's own pauses not counted
+        pause = min(LONGEST_RUN_GAP, 0.5 * self.device_silence)
+        self.drivers = DriverSilence(self.device_silence, pause)
+        self.create_timer(pause / 5.0, self._watch_drivers,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.wrist_now = {}                # the servos' latest joint positions [rad]
         self.create_subscription(JointState, 'joint_states', self._on_joints, 20)
         self.window_publisher = self.create_publisher(PointStamped, 'thermal/window', LATCHED)
@@ -287,16 +296,22 @@ class PainterNode(Node):
 
     def _on_joints(self, message):
         device = 'servo' if 'lens_pitch' in message.name else 'dobot'
-        self.heard[device] = time.monotonic()
+        self.drivers.heard(device, time.monotonic())
         if device == 'servo':
             self.wrist_now = dict(zip(message.name, message.position))
 
+    def _watch_drivers(self):
+        pause = self.drivers.tick(time.monotonic())
+        if pause:
+            self.get_logger().warning(
+                f'the painter did not run for {pause:.2f} s (a starved or paused process): '
+                "the drivers' silence is counted again from now")
+
     def _silent_devices(self):
         """Return {device: sentence} of the drivers whose joint states stopped (wall clock)."""
-        now = time.monotonic()
-        return {device: f'{device} silent for {now - heard:.1f} s (no joint states: driver '
+        return {device: f'{device} silent for {seconds:.1f} s (no joint states: driver '
                         'stopped?)'
-                for device, heard in self.heard.items() if now - heard > self.device_silence}
+                for device, seconds in self.drivers.silent(time.monotonic()).items()}
 
     def _wake_heating(self):
         """Wake the heating loop's wait for thermal statistics: it checks and retreats."""

@@ -1,0 +1,59 @@
+"""
+Which drivers' joint states stopped, as the painter can tell on the wall clock.
+
+A driver polls its device and publishes ``joint_states`` at a steady wall rate (20 Hz by
+default); a driver whose joint states stop for ``device_silence`` while the lens heats the
+wood is a device fault, and the painter retreats (issue 13). The painter can only hear what
+its own process gets to read: a painter that was not running for a while (starved of the
+CPU by other work on the machine, stopped, its host paused) finds every driver "silent" for
+as long as it was away, and its first check after the pause can run before it has read the
+joint states that queued meanwhile. So the silence is counted only over time in which the
+watcher itself was running: a steady tick (``tick``, every few tens of milliseconds) that
+comes much later than its period says the process was away, and the silence is counted
+again from then. A driver that is really silent is then reported at most ``device_silence``
+after the watcher came back.
+
+Pure Python: no rclpy. Times in seconds on one monotonic clock.
+"""
+
+import math
+
+
+class DriverSilence:
+    """The drivers whose joint states stopped, not counting the watcher's own pauses."""
+
+    def __init__(self, silence=1.0, pause=0.25):
+        """
+        Report a driver after `silence` [s] without joint states.
+
+        `pause` [s]: a gap between two ticks longer than this means the watcher was not
+        running; it must exceed the tick period and its ordinary lateness.
+        """
+        if not (silence > 0.0 and pause > 0.0):
+            raise ValueError(f'silence and pause must be > 0 s, got {silence} and {pause}')
+        self.silence, self.pause = float(silence), float(pause)
+        self._heard = {}                    # device -> time of its last joint state
+        self._tick = None
+        self._back = -math.inf              # when the watcher last came back from a pause
+        self.pauses = 0                     # pauses of the watcher seen so far
+
+    def heard(self, device, now):
+        """Note joint states from `device` at `now`."""
+        self._heard[device] = float(now)
+
+    def tick(self, now):
+        """Note that the watcher runs at `now`; return the pause it just came back from, or 0."""
+        now = float(now)
+        gap = 0.0 if self._tick is None else now - self._tick
+        self._tick = now
+        if gap > self.pause:
+            self._back = now
+            self.pauses += 1
+            return gap
+        return 0.0
+
+    def silent(self, now):
+        """Return {device: seconds since its last joint state} of the drivers now silent."""
+        now = float(now)
+        return {device: now - heard for device, heard in self._heard.items()
+                if now - max(heard, self._back) > self.silence}

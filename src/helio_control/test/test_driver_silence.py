@@ -1,0 +1,61 @@
+"""DriverSilence: a driver's silence counts only while the watcher itself runs."""
+
+from helio_control.driver_silence import DriverSilence
+import pytest
+
+
+def ticking(watch, start, end, period=0.05):
+    """Tick `watch` every `period` from `start` to `end` [s]; return the last tick."""
+    t = start
+    while t <= end + 1e-9:
+        watch.tick(t)
+        t += period
+    return t - period
+
+
+def test_a_driver_silent_past_the_limit_while_the_watcher_runs_is_reported_with_its_gap():
+    watch = DriverSilence(silence=1.0)
+    watch.heard('servo', 10.0)
+    watch.heard('dobot', 10.0)
+    ticking(watch, 10.0, 11.5)
+    watch.heard('dobot', 11.4)
+    assert watch.silent(10.95) == {}
+    assert watch.silent(11.5) == {'servo': pytest.approx(1.5)}
+
+
+def test_a_pause_of_the_watcher_is_not_the_drivers_silence():
+    watch = DriverSilence(silence=1.0, pause=0.25)
+    watch.heard('servo', 10.0)
+    ticking(watch, 10.0, 10.2)
+    # the watcher's process gets no CPU from 10.2 to 11.6: the joint states sent meanwhile
+    # are still queued when it looks again
+    assert watch.tick(11.6) == pytest.approx(1.4)
+    assert watch.pauses == 1
+    assert watch.silent(11.61) == {}               # the 1.41 s gap is the watcher's
+    watch.heard('servo', 11.62)                    # the queued joint states are read
+    assert watch.silent(11.7) == {}
+
+
+def test_a_driver_still_silent_after_the_pause_is_reported_a_silence_after_it():
+    watch = DriverSilence(silence=1.0, pause=0.25)
+    watch.heard('servo', 10.0)
+    ticking(watch, 10.0, 10.2)
+    watch.tick(11.6)                               # back from a pause
+    ticking(watch, 11.65, 12.7)
+    assert watch.silent(12.55) == {}               # 0.95 s since the watcher came back
+    assert watch.silent(12.65) == {'servo': pytest.approx(2.65)}
+
+
+def test_ordinary_tick_lateness_is_not_a_pause_and_an_unheard_driver_is_not_reported():
+    watch = DriverSilence(silence=1.0, pause=0.25)
+    watch.heard('dobot', 0.0)
+    assert watch.tick(0.0) == 0.0                  # the first tick has nothing to compare
+    assert watch.tick(0.2) == 0.0                  # late, but within the pause
+    assert watch.pauses == 0
+    assert watch.silent(1.3) == {'dobot': pytest.approx(1.3)}     # no 'servo': never heard
+
+
+@pytest.mark.parametrize('silence, pause', [(0.0, 0.25), (1.0, 0.0), (-1.0, 0.25)])
+def test_limits_that_are_not_positive_are_refused(silence, pause):
+    with pytest.raises(ValueError, match='must be > 0'):
+        DriverSilence(silence, pause)
