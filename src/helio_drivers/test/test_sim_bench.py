@@ -18,3 +18,14 @@ def test_sim_bench_reports_heating_moving_and_a_whole_painting(tmp_path):
                  'sim_rgb_frame_moving', 'sim_flux_trace'):
         assert figures[f'{part}_ms_median'] > 0.0
     assert all(isinstance(value, float) for value in figures.values())
+
+
+def test_the_node_bench_keeps_the_arm_moving_and_counts_the_frames_it_receives():
+    figures = bench.bench_node(bench._rig()[1], wall_seconds=1.5, busy=False)
+    for phase in ('heating', 'moving'):
+        assert figures[f'sim_node_{phase}_rtf_wall'] > 0.0
+        assert figures[f'sim_node_{phase}_thermal_hz'] > 0.0
+    # the drivers' poll cadence (every 20 ms of wall time) over 1.5 s
+    assert 10.0 <= figures['sim_node_moving_polls'] <= 80.0
+    assert 'sim_node_moving_queue_drained' in figures
+    assert all(isinstance(value, float) for value in figures.values())

@@ -77,6 +77,10 @@ N_P_TARGET = 30
 DDS_PROFILE_ENV = 'FASTRTPS_DEFAULT_PROFILES_FILE'
 JOINT_STATE_RATE = 20.0   # [Hz wall] each driver's joint_states (device_action_node)
 MOVE_POLL_PERIOD = 0.02   # [s wall] the drivers' polling of a running move (poll_period)
+# Dobot moves kept queued ahead of the one running, so that the arm never waits for the next
+# poll (a 20 ms poll is 0.5 s simulated at 25x; with 4 legs the queue ran out at 13-17 % of
+# the polls, with 12 at none; the emulated Dobot queues 32)
+LEGS_AHEAD = 12
 
 
 def _rig():
@@ -327,6 +331,36 @@ class NodeRun:
         """Tell whether both devices finished the last command."""
         return self.dobot.executed_index() >= index and not self.servo.moving()
 
+    def hold_at(self, x, timeout=60.0):
+        """Move to joints x after every queued move and wait there until it stands still."""
+        index = self.command(x)
+        deadline = time.monotonic() + timeout
+        while not self.arrived(index):
+            if time.monotonic() > deadline:
+                raise RuntimeError('the emulated arm did not reach the dot')
+            self.spin(0.05)
+
+    def keep_moving(self, targets):
+        """
+        Return a `between` for ``measure`` that keeps the arm moving among joints `targets`.
+
+        At each poll it queues the next targets in turn while fewer than LEGS_AHEAD Dobot
+        moves wait behind the running one (the Dobot runs its queue back to back) and sets
+        the servos to the newest target, so the arm moves all the time while the devices
+        are asked no more than the drivers ask them. Its `polls` and `drained` count the
+        polls and those that found the queue run out (the arm possibly still).
+        """
+        state = {'k': 0, 'queued': self.dobot.executed_index()}
+
+        def between(executed):
+            between.polls += 1
+            between.drained += executed >= state['queued']
+            while state['queued'] - executed < LEGS_AHEAD:
+                state['k'] = (state['k'] + 1) % len(targets)
+                state['queued'] = self.command(targets[state['k']])
+        between.polls = between.drained = 0
+        return between
+
     def read_joints(self):
         """Read both devices' joints as the drivers' joint_states do (pose; two positions)."""
         self.dobot.get_pose()
@@ -334,19 +368,22 @@ class NodeRun:
             self.servo.get_position(channel)
 
     def poll_move(self):
-        """Poll a running move as the drivers' device threads do (every poll_period)."""
+        """Poll a running move as the drivers' device threads do; return the executed index."""
         self.dobot.get_alarms()
-        self.dobot.executed_index()
+        executed = self.dobot.executed_index()
         self.servo.moving()
         self.read_joints()      # the arm's pose and the servos' positions
+        return executed
 
     def measure(self, wall_seconds, between=None):
         """
         Return (simulated, wall, node cpu, frames) over `wall_seconds`.
 
         The joints are read as the drivers' joint_states read them (every
-        1 / JOINT_STATE_RATE of wall time); with `between` (the next move's start, at every
-        turn) a move is polled as the drivers poll it, every MOVE_POLL_PERIOD.
+        1 / JOINT_STATE_RATE of wall time); with `between` a move is polled as the drivers
+        poll it, every MOVE_POLL_PERIOD, and `between(executed Dobot index)` is called after
+        each poll (``keep_moving``). Like the drivers' device threads, the next read or poll
+        is due a period after the last one, not caught up in a burst when this probe lags.
         """
         self.spin(0.3)
         deadline = time.monotonic() + 30.0
@@ -365,14 +402,12 @@ class NodeRun:
                 break
             if now >= next_joints:
                 self.read_joints()
-                next_joints += 1.0 / JOINT_STATE_RATE
-            if between is not None:
-                if now >= next_poll:
-                    self.poll_move()
-                    next_poll += MOVE_POLL_PERIOD
-                between()
-            wait = 0.01 if between is not None else min(next_joints, end) - now
-            self.executor.spin_once(timeout_sec=max(wait, 0.0))
+                next_joints = now + 1.0 / JOINT_STATE_RATE
+            if between is not None and now >= next_poll:
+                between(self.poll_move())
+                next_poll = now + MOVE_POLL_PERIOD
+            due = min(next_joints, next_poll) if between is not None else next_joints
+            self.executor.spin_once(timeout_sec=max(min(due, end) - time.monotonic(), 0.0))
         simulated = self.sim_time - sim0
         frames = {name: self.counts[name] - counts0[name] for name in self.counts}
         return (simulated, time.monotonic() - wall0,
@@ -403,26 +438,20 @@ def bench_node(rig_file, wall_seconds, busy):
         try:
             focus = [true_sun_focus_joints(run.world, (DOT[0] + SPACING * k, DOT[1]), D_LP)
                      for k in range(2)]
-            index = run.command(focus[0])
-            deadline = time.monotonic() + 60.0
-            while not run.arrived(index):
-                if time.monotonic() > deadline:
-                    raise RuntimeError('the emulated arm did not reach the dot')
-                run.spin(0.05)
             for suffix, with_busy in (('', False), ('_busy', True)):
                 if with_busy and not busy:
                     continue
                 with busy_process(with_busy):
                     figures[f'load_average_1min_node{suffix}'] = os.getloadavg()[0]
-                    run.command(focus[0])
+                    run.hold_at(focus[0])
                     heating = run.measure(wall_seconds)
-                    state = {'k': 0, 'index': run.command(focus[1])}
-
-                    def keep_moving():
-                        if run.arrived(state['index']):
-                            state['k'] ^= 1
-                            state['index'] = run.command(focus[state['k']])
-                    moving = run.measure(wall_seconds, keep_moving)
+                    mover = run.keep_moving(focus)
+                    moving = run.measure(wall_seconds, mover)
+                # polls after the first that found the arm's queue run out: 0 when the arm
+                # moved all the time
+                figures[f'sim_node_moving{suffix}_queue_drained'] = float(
+                    max(mover.drained - 1, 0))
+                figures[f'sim_node_moving{suffix}_polls'] = float(mover.polls)
                 for name, (simulated, wall, cpu, frames) in (('heating', heating),
                                                              ('moving', moving)):
                     key = f'sim_node_{name}{suffix}'
