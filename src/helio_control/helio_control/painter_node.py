@@ -79,10 +79,10 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 RELIABLE = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE)
 COOLING_RULES = ('paper', 'window')
 # Goal fields that do not change what is painted (a resumed goal may differ in them).
-# a steady tick this late says the painter itself did not run (DriverSilence): at most this,
-# and at most half device_silence [s wall]
-LONGEST_RUN_GAP = 0.5
 NOT_THE_PICTURE = ('run_dir', 'fresh', 'start_index', 'dry_run')
+# A steady tick this late says the painter itself did not run (DriverSilence): at most this,
+# and at most half device_silence [s wall].
+LONGEST_RUN_GAP = 0.5
 
 
 class PaintFailed(Exception):
