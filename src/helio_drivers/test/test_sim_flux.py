@@ -5,6 +5,7 @@ import math
 
 from helio_drivers.sim.flux import (bin_on_edges, irradiance_on_cells, LensFlux,
                                     shadow_fractions)
+from helio_drivers.sim.kernels import chosen_rays
 from helio_optics.geometry import homogeneous, rotation_y, unit
 from helio_optics.lens import LensParameters, pmma_index, trace
 import numpy as np
@@ -180,6 +181,25 @@ def test_binning_on_uneven_edges_equals_numpy_histogram2d():
     expected, _, _ = np.histogram2d(y, x, bins=(y_edges, x_edges), weights=weights)
     assert np.allclose(bin_on_edges(x, y, weights, x_edges, y_edges), expected,
                        rtol=1e-12, atol=1e-12)
+
+
+def test_the_chosen_rays_are_numpys_boolean_index_of_the_trace():
+    # the kernel against numpy's a[chosen] and the slopes' division, bit for bit: rays
+    # missing in every band (and a band with none), a subset, a power scale
+    rng = np.random.default_rng(3)
+    bands, rays = 4, 3001
+    points, directions = rng.normal(size=(bands, rays, 3)), rng.normal(size=(bands, rays, 3))
+    power = rng.random((bands, rays))
+    chosen = (rng.random((bands, rays)) < 0.8) & (np.arange(rays) % 3 == 0)[None, :]
+    chosen[2] = False
+    count = int(np.count_nonzero(chosen))
+    out_points, out_slopes, out_power = np.empty((count, 2)), np.empty((count, 2)), \
+        np.empty(count)
+    chosen_rays(chosen, points, directions, power, 3.0, out_points, out_slopes, out_power)
+    leaving = directions[chosen]
+    assert np.array_equal(out_points, points[chosen][:, :2])
+    assert np.array_equal(out_slopes, leaving[:, :2] / leaving[:, 2:3])
+    assert np.array_equal(out_power, power[chosen] * 3.0)
 
 
 def test_a_moving_lens_traces_fewer_rays_with_the_same_power_and_spot():

@@ -21,8 +21,8 @@ carries its traced rays along, exactly); a cloud just scales it.
 from dataclasses import dataclass, replace
 import math
 
-from helio_drivers.sim.kernels import (bin_points, carried_points, points_summary, shadow_grid,
-                                       shadow_shares)
+from helio_drivers.sim.kernels import (bin_points, carried_points, chosen_rays, points_summary,
+                                       shadow_grid, shadow_shares)
 from helio_optics.geometry import invert_transform
 from helio_optics.lens import (area_samples, LensParameters, pmma_index, SOLAR_BANDS,
                                trace_bands)
@@ -250,7 +250,7 @@ class LensFlux:
         subset[::stride] = True
         return _TracedRays(
             key=(T_world_lens.copy(), s0.copy()), sparse=sparse, hit=result.hit,
-            points=result.points[..., :2], directions=result.directions, power=power,
+            points=result.points, directions=result.directions, power=power,
             subset=subset, stride=stride, incident=incident,
             transmission=self.lens.transmission, direct=max(0.0, -float(s0[2])),
             lens_axis=T_world_lens[:3, 2].copy(), aperture_radius=self.lens.aperture_radius,
@@ -288,11 +288,14 @@ class _TracedRays:
             hit, points, directions, power, subset, stride, passed, incident = self._trace
             chosen = hit if name == 'all' else hit & subset[None, :]
             # the rays that reach the panel, band after band (as B separate traces gave them)
-            chosen_power = power[chosen] * (1.0 if name == 'all' else float(stride))
+            count = int(np.count_nonzero(chosen))
+            chosen_points, slopes = np.empty((count, 2)), np.empty((count, 2))
+            chosen_power = np.empty(count)
+            chosen_rays(chosen, points, directions, power,
+                        1.0 if name == 'all' else float(stride), chosen_points, slopes,
+                        chosen_power)
             lost = passed - float(chosen_power.sum())
-            leaving = directions[chosen]
-            self._sets[name] = (np.ascontiguousarray(points[chosen]),
-                                leaving[:, :2] / leaving[:, 2:3], chosen_power,
+            self._sets[name] = (chosen_points, slopes, chosen_power,
                                 lost / incident if incident > 0.0 else 0.0)
         return self._sets[name]
 

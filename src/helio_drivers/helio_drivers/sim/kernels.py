@@ -536,6 +536,31 @@ def shadow_shares(x_edges, y_edges, form, samples, out):
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
+def chosen_rays(chosen, points, directions, power, power_scale, out_points, out_slopes,
+                out_power):
+    """
+    Fill the rays of `chosen` (B, N) bool, band after band (flux._TracedRays's sets).
+
+    Of `points` and `directions` (B, N, 3) and `power` (B, N), in the order of numpy's
+    ``a[chosen]``: `out_points` (n, 2) the hit point's x and y, `out_slopes` (n, 2) the
+    leaving direction's d_x / d_z and d_y / d_z, `out_power` (n,) the power times
+    `power_scale`. One pass: numpy's boolean index of the (B, N, 3) arrays and the slopes'
+    strided division took 4.6 ms of a 120 000-ray trace's 12 ms.
+    """
+    n = 0
+    for band in range(chosen.shape[0]):
+        for ray in range(chosen.shape[1]):
+            if chosen[band, ray]:
+                out_points[n, 0] = points[band, ray, 0]
+                out_points[n, 1] = points[band, ray, 1]
+                z = directions[band, ray, 2]
+                out_slopes[n, 0] = directions[band, ray, 0] / z
+                out_slopes[n, 1] = directions[band, ray, 1] / z
+                out_power[n] = power[band, ray] * power_scale
+                n += 1
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
 def carried_points(points, slopes, shift_x, shift_y, shift_z, out):
     """Fill `out` (N, 2): points + (shift_x, shift_y) - shift_z slopes (flux._TracedRays)."""
     for p in range(points.shape[0]):
