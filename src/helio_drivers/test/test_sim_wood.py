@@ -187,6 +187,11 @@ def test_bad_input_is_refused_and_leaves_the_state_unchanged():
         panel.step(0.1, np.zeros((3, 3)))
     with pytest.raises(ValueError, match='>= 0'):
         panel.step(0.1, -np.ones(panel.cell_areas.shape))
+    for bad in (np.nan, np.inf):     # one bad column among good ones
+        irradiance = np.full(panel.cell_areas.shape, 900.0)
+        irradiance[5, 7] = bad
+        with pytest.raises(ValueError, match='finite'):
+            panel.step(0.1, irradiance)
     with pytest.raises(ValueError, match='dt'):
         panel.step(0.0, np.zeros(panel.cell_areas.shape))
     with pytest.raises(ValueError, match='conductivity'):

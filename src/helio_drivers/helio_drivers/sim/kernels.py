@@ -336,20 +336,92 @@ def _cell_of(edges, cells, first, last, per_metre, value):
     return _first_at_or_above(edges, value, True) - 1
 
 
+@numba.njit(cache=True, nogil=True, error_model='numpy', inline='always')
+def _loss_and_slope_at(rise, ambient_kelvin, ambient4, convection, radiating):
+    """
+    Return the surface loss [W/m^2] and its slope [W/(m^2 K)] at a top-layer rise [K].
+
+    loss = h (T - T_a) + eps sigma (T^4 - T_a^4), slope = h + 4 eps sigma T^3 (T in K,
+    at least 0); `ambient4` = T_a^4.
+    """
+    t = max(rise + ambient_kelvin, 0.0)
+    squared = t * t
+    return (convection * rise + radiating * (squared * squared - ambient4),
+            4.0 * radiating * (squared * t) + convection)
+
+
 @numba.njit(cache=True, nogil=True, error_model='numpy')
 def surface_loss(top, ambient_kelvin, convection, radiating, loss, slope):
     """
     Fill the surface loss [W/m^2] and its slope [W/(m^2 K)] at top-layer rises `top` [K].
 
-    loss = h (T - T_a) + eps sigma (T^4 - T_a^4), slope = h + 4 eps sigma T^3 (T in K,
-    at least 0), per element of the flat arrays (``WoodPanel._loss_and_slope``).
+    Per element of the flat arrays (``WoodPanel._loss_and_slope``; ``_loss_and_slope_at``).
     """
     ambient4 = ambient_kelvin ** 4
     for p in range(top.shape[0]):
-        t = max(top[p] + ambient_kelvin, 0.0)
-        squared = t * t
-        loss[p] = convection * top[p] + radiating * (squared * squared - ambient4)
-        slope[p] = 4.0 * radiating * (squared * t) + convection
+        loss[p], slope[p] = _loss_and_slope_at(top[p], ambient_kelvin, ambient4, convection,
+                                               radiating)
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def surface_source(top, irradiance, absorptance, ambient_kelvin, convection, radiating,
+                   factor, top_pivot, absorbed, h_top, remainder, dt_source, top_loss,
+                   top_diagonal):
+    """
+    Fill a heat step's surface terms from top-layer rises `top` and `irradiance` (flat).
+
+    What ``WoodPanel.step`` computed in numpy passes, element for element the same
+    arithmetic: absorbed = absorptance x irradiance; the loss linearised at `top`
+    (h_top = its slope, remainder = loss - h_top x top); dt_source = (absorbed -
+    remainder) x `factor` (dt / (rho c dz0)); top_loss = h_top x `factor`; top_diagonal =
+    top_loss + `top_pivot`. Returns False (the outputs unfinished) when an irradiance is
+    negative or not finite.
+    """
+    ambient4 = ambient_kelvin ** 4
+    for p in range(top.shape[0]):
+        q = irradiance[p]
+        if not (q >= 0.0 and q < np.inf):   # NaN fails both
+            return False
+        taken = absorptance[p] * q
+        loss, slope = _loss_and_slope_at(top[p], ambient_kelvin, ambient4, convection,
+                                         radiating)
+        rest = loss - slope * top[p]
+        absorbed[p], h_top[p], remainder[p] = taken, slope, rest
+        dt_source[p] = (taken - rest) * factor
+        top_loss[p] = slope * factor
+        top_diagonal[p] = top_loss[p] + top_pivot
+    return True
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def surface_ledger(absorbed, h_top, remainder, top, h_back, bottom, areas):
+    """
+    Return a heat step's (absorbed, lost at the top, lost at the back) power [W] (flat).
+
+    Sums over the columns of absorbed x area, (h_top x top + remainder) x area (the
+    linearised loss at the new top rises) and h_back x bottom x area.
+    """
+    absorbed_power = lost_top = lost_back = 0.0
+    for p in range(areas.shape[0]):
+        area = areas[p]
+        absorbed_power += absorbed[p] * area
+        lost_top += (h_top[p] * top[p] + remainder[p]) * area
+        lost_back += h_back * bottom[p] * area
+    return absorbed_power, lost_top, lost_back
+
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def surface_rise(top, absorbed, ambient_kelvin, convection, radiating, half_depth,
+                 conductivity, out):
+    """
+    Fill the surface rise [K]: top + (absorbed - loss(top)) x `half_depth` / conductivity.
+
+    The half-layer extrapolation of ``WoodPanel._surface_theta`` (flat arrays).
+    """
+    ambient4 = ambient_kelvin ** 4
+    for p in range(top.shape[0]):
+        loss, _ = _loss_and_slope_at(top[p], ambient_kelvin, ambient4, convection, radiating)
+        out[p] = top[p] + (absorbed[p] - loss) * half_depth / conductivity
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')

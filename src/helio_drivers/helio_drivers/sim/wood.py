@@ -40,7 +40,8 @@ from dataclasses import dataclass
 import math
 
 from helio_drivers.sim.kernels import (bilinear_weights_on_axis, douglas_step, heat_sinks,
-                                       surface_loss, thomas_factors)
+                                       surface_ledger, surface_loss, surface_rise,
+                                       surface_source, thomas_factors)
 import numpy as np
 
 STEFAN_BOLTZMANN = 5.670374419e-8  # [W/(m^2 K^4)]
@@ -404,13 +405,13 @@ class WoodPanel:
 
     def _surface_theta(self, top, absorbed):
         """Surface theta from the top-layer theta and the absorbed flux [K]."""
-        k = self.wood.conductivity
-        loss = self._surface_loss(top)
-        return top + (absorbed - loss) * (0.5 * self.z_widths[0]) / k
-
-    def _surface_loss(self, top):
-        """Convective and radiative loss flux at the surface for top-layer theta [W/m^2]."""
-        return self._loss_and_slope(top)[0]
+        w = self.wood
+        top = np.ascontiguousarray(top, dtype=float)
+        surface = np.empty_like(top)
+        surface_rise(top.reshape(-1), np.ascontiguousarray(absorbed, dtype=float).reshape(-1),
+                     w.ambient + KELVIN, w.convection_top, w.emissivity * STEFAN_BOLTZMANN,
+                     0.5 * self.z_widths[0], w.conductivity, surface.reshape(-1))
+        return surface
 
     def _loss_and_slope(self, top):
         """Return the surface loss [W/m^2] and its derivative [W/(m^2 K)] at theta `top`."""
@@ -594,28 +595,36 @@ class WoodPanel:
         """
         if not dt > 0.0:
             raise ValueError(f'dt must be > 0 s, got {dt}')
-        irradiance = np.asarray(irradiance, dtype=float)
+        irradiance = np.ascontiguousarray(irradiance, dtype=float)
         if irradiance.shape != self.cell_areas.shape:
             raise ValueError(f'irradiance must have shape {self.cell_areas.shape}, '
                              f'got {irradiance.shape}')
-        if not np.all(np.isfinite(irradiance)) or np.any(irradiance < 0.0):
-            raise ValueError('irradiance must be finite and >= 0')
-        rho_c = self.wood.volumetric_heat_capacity
-        dz0 = self.z_widths[0]
-        absorbed = self._absorptance * irradiance
+        w = self.wood
         theta = self._flat('theta').reshape(self.theta.shape)
-        h_top, remainder = self._loss_linearisation(theta[0])
-        dt_source = (absorbed - remainder) * (dt / (rho_c * dz0))
-        top_loss = h_top * (dt / (rho_c * dz0))
         dt_ay, dt_az, x_factors, y_factors, z_elimination, top = self._sweep_coefficients(dt)
+        # the surface terms in one compiled pass (kernels.surface_source): absorbed flux,
+        # the loss linearised at the top layer (h_top theta + remainder), the explicit
+        # source and the implicit loss of the step
+        absorbed, h_top, remainder, dt_source, top_loss, top_diagonal = (
+            np.empty_like(self.cell_areas) for _ in range(6))
+        if not surface_source(theta[0].reshape(-1), irradiance.reshape(-1),
+                              self._flat('_absorptance'), w.ambient + KELVIN,
+                              w.convection_top, w.emissivity * STEFAN_BOLTZMANN,
+                              dt / (w.volumetric_heat_capacity * self.z_widths[0]), top,
+                              absorbed.reshape(-1), h_top.reshape(-1), remainder.reshape(-1),
+                              dt_source.reshape(-1), top_loss.reshape(-1),
+                              top_diagonal.reshape(-1)):
+            raise ValueError('irradiance must be finite and >= 0')
         u3 = np.empty_like(theta)
         layer_max = douglas_step(theta, u3, dt_source, top_loss, dt_ay, dt_az, x_factors,
-                                 y_factors, z_elimination, top_loss + top)
+                                 y_factors, z_elimination, top_diagonal)
 
-        areas = self.cell_areas
-        self.ledger.absorbed += dt * float(np.sum(absorbed * areas))
-        self.ledger.lost_top += dt * float(np.sum((h_top * u3[0] + remainder) * areas))
-        self.ledger.lost_back += dt * float(np.sum(self._h_back * u3[-1] * areas))
+        absorbed_power, lost_top, lost_back = surface_ledger(
+            absorbed.reshape(-1), h_top.reshape(-1), remainder.reshape(-1), u3[0].reshape(-1),
+            float(self._h_back), u3[-1].reshape(-1), self._flat('cell_areas'))
+        self.ledger.absorbed += dt * absorbed_power
+        self.ledger.lost_top += dt * lost_top
+        self.ledger.lost_back += dt * lost_back
         self.theta = u3
         evaporated, pyrolysed = self._heat_sinks(dt, layer_max)
         self.ledger.evaporated += evaporated
