@@ -405,21 +405,23 @@ class WoodPanel:
 
     def _surface_theta(self, top, absorbed):
         """Surface theta from the top-layer theta and the absorbed flux [K]."""
-        w = self.wood
         top = np.ascontiguousarray(top, dtype=float)
         surface = np.empty_like(top)
         surface_rise(top.reshape(-1), np.ascontiguousarray(absorbed, dtype=float).reshape(-1),
-                     w.ambient + KELVIN, w.convection_top, w.emissivity * STEFAN_BOLTZMANN,
-                     0.5 * self.z_widths[0], w.conductivity, surface.reshape(-1))
+                     *self._loss_terms(), 0.5 * self.z_widths[0], self.wood.conductivity,
+                     surface.reshape(-1))
         return surface
+
+    def _loss_terms(self):
+        """Return the surface loss kernels' (T_ambient [K], h_top, emissivity x sigma)."""
+        w = self.wood
+        return w.ambient + KELVIN, w.convection_top, w.emissivity * STEFAN_BOLTZMANN
 
     def _loss_and_slope(self, top):
         """Return the surface loss [W/m^2] and its derivative [W/(m^2 K)] at theta `top`."""
-        w = self.wood
         top = np.ascontiguousarray(top, dtype=float)
         loss, slope = np.empty_like(top), np.empty_like(top)
-        surface_loss(top.reshape(-1), w.ambient + KELVIN, w.convection_top,
-                     w.emissivity * STEFAN_BOLTZMANN, loss.reshape(-1), slope.reshape(-1))
+        surface_loss(top.reshape(-1), *self._loss_terms(), loss.reshape(-1), slope.reshape(-1))
         return loss, slope
 
     def _loss_linearisation(self, top):
@@ -599,7 +601,6 @@ class WoodPanel:
         if irradiance.shape != self.cell_areas.shape:
             raise ValueError(f'irradiance must have shape {self.cell_areas.shape}, '
                              f'got {irradiance.shape}')
-        w = self.wood
         theta = self._flat('theta').reshape(self.theta.shape)
         dt_ay, dt_az, x_factors, y_factors, z_elimination, top = self._sweep_coefficients(dt)
         # the surface terms in one compiled pass (kernels.surface_source): absorbed flux,
@@ -608,10 +609,9 @@ class WoodPanel:
         absorbed, h_top, remainder, dt_source, top_loss, top_diagonal = (
             np.empty_like(self.cell_areas) for _ in range(6))
         if not surface_source(theta[0].reshape(-1), irradiance.reshape(-1),
-                              self._flat('_absorptance'), w.ambient + KELVIN,
-                              w.convection_top, w.emissivity * STEFAN_BOLTZMANN,
-                              dt / (w.volumetric_heat_capacity * self.z_widths[0]), top,
-                              absorbed.reshape(-1), h_top.reshape(-1), remainder.reshape(-1),
+                              self._flat('_absorptance'), *self._loss_terms(),
+                              dt / (self.wood.volumetric_heat_capacity * self.z_widths[0]),
+                              top, absorbed.reshape(-1), h_top.reshape(-1), remainder.reshape(-1),
                               dt_source.reshape(-1), top_loss.reshape(-1),
                               top_diagonal.reshape(-1)):
             raise ValueError('irradiance must be finite and >= 0')
