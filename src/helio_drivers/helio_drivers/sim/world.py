@@ -26,12 +26,12 @@ from helio_drivers.sim.cameras import (light_window, RgbCamera, RgbSettings, The
 from helio_drivers.sim.clock import SimClock
 from helio_drivers.sim.flux import irradiance_on_cells, lens_pose_in_world, LensFlux
 from helio_drivers.sim.kernels import char_canvas
-from helio_drivers.sim.memory import keep_freed_memory
 from helio_drivers.sim.sun import CloudCover, RandomClouds, Sun
 from helio_drivers.sim.wood import GridParameters, WoodPanel, WoodParameters
 from helio_optics.ephemeris import Site
 from helio_optics.geometry import invert_transform
 from helio_optics.lens import LensParameters
+from helio_optics.node_kit.process_tuning import keep_large_buffers
 from helio_optics.rig_kinematics import Rig, RigParameters
 import numpy as np
 
@@ -171,7 +171,9 @@ class SimWorld:
         world's clock (``SimDevices(world.clock)``) and attach their ``joint_positions`` with
         ``attach_joint_source``.
         """
-        keep_freed_memory()   # its arrays are reused, not page-faulted in (memory.py)
+        # its 0.3-4 MB arrays, allocated and freed every step and frame, are reused from the
+        # heap, not page-faulted in anew (a tridiagonal product 1.1 -> 0.3 ms, SIMULATION.md)
+        keep_large_buffers()
         self.settings = settings or SimSettings()
         s = self.settings
         if not s.step > 0.0:
