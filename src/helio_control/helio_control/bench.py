@@ -131,7 +131,7 @@ def main(args=None):
     parser.add_argument('--quick', action='store_true',
                         help='1,000 dots only, one repetition, short long-budget')
     options = parser.parse_args(args)
-    return report(run(options.quick), options.json)
+    return report(run(options.quick), options.json, machine=True)
 
 
 if __name__ == '__main__':

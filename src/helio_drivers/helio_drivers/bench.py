@@ -167,7 +167,7 @@ def main(argv=None):
     figures.update(bench_client_moves(poll_period=0.02))
     if not args.skip_node:
         figures.update(bench_node_moves())
-    return report(figures, args.json)
+    return report(figures, args.json, machine=True)
 
 
 if __name__ == '__main__':

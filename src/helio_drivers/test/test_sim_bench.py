@@ -17,6 +17,8 @@ def test_sim_bench_reports_heating_moving_and_a_whole_painting(tmp_path):
     for part in ('sim_heat_step', 'sim_thermal_frame', 'sim_rgb_frame',
                  'sim_rgb_frame_moving', 'sim_flux_trace'):
         assert figures[f'{part}_ms_median'] > 0.0
+    # the machine it ran on (helio_optics.bench_report.machine_figures)
+    assert figures['machine_python_loop_ns'] > 0.0 and figures['machine_memory_copy_gb_s'] > 0.0
     assert all(isinstance(value, float) for value in figures.values())
 
 

@@ -100,7 +100,7 @@ def main(args=None):
     add_json_option(parser)
     parser.add_argument('--quick', action='store_true', help='fewer repetitions')
     options = parser.parse_args(args)
-    return report(run(options.quick), options.json)
+    return report(run(options.quick), options.json, machine=True)
 
 
 if __name__ == '__main__':

@@ -3,10 +3,12 @@
 import argparse
 import json
 import math
+import os
 import time
 
 from helio_optics.bench_report import add_json_option, call_durations, median_call_ms
-from helio_optics.bench_report import report, write_figures
+from helio_optics.bench_report import machine_description, machine_figures, report
+from helio_optics.bench_report import write_figures
 import numpy as np
 import pytest
 
@@ -112,3 +114,25 @@ def test_call_durations_times_each_call_once():
 def test_median_call_ms_is_in_milliseconds():
     call, calls = busy_for(0.003)
     assert median_call_ms(call, 3) >= 3.0 and len(calls) == 3
+
+
+def test_the_machine_yardsticks_are_in_their_units():
+    figures = machine_figures(repeats=2)
+    assert set(figures) == {'machine_python_loop_ns', 'machine_memory_copy_gb_s'}
+    # a loop turn of CPython takes tens of nanoseconds, not seconds or picoseconds
+    assert 1.0 < figures['machine_python_loop_ns'] < 2000.0
+    # a memory copy runs at 0.1-1000 GB/s on any machine that runs this project
+    assert 0.1 < figures['machine_memory_copy_gb_s'] < 1000.0
+
+
+def test_a_report_with_the_machine_names_it_and_adds_its_yardsticks(tmp_path, capsys):
+    path = tmp_path / 'figures.json'
+    assert report(FIGURES, str(path), machine=True) == 0
+    first, *rest = capsys.readouterr().out.splitlines()
+    assert first == f'machine: {machine_description()}'
+    assert first.endswith(f', {len(os.sched_getaffinity(0))} cores')
+    written = json.loads(path.read_text())
+    assert set(written) == set(FIGURES) | {'machine_python_loop_ns',
+                                           'machine_memory_copy_gb_s'}
+    assert len(rest) == len(written)
+    assert 'machine_python_loop_ns' not in FIGURES     # the caller's figures left as they were

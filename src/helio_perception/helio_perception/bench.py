@@ -270,7 +270,7 @@ def main(argv=None):
     if args.e2e_seconds > 0:
         bench_end_to_end(640, 480, 30.0, args.e2e_seconds, figures,
                          profile=not args.no_dds_profile)
-    return report(figures, args.json)
+    return report(figures, args.json, machine=True)
 
 
 if __name__ == '__main__':

@@ -551,7 +551,8 @@ def main(argv=None):
         args.seconds, args.dots, args.node_seconds = 2.0, 1, 2.0
     figures = bench_sim(args.seconds, args.dots, args.skip_node, args.node_seconds,
                         not args.skip_busy)
-    return report({name: round(float(value), 6) for name, value in figures.items()}, args.json)
+    return report({name: round(float(value), 6) for name, value in figures.items()}, args.json,
+                  machine=True)
 
 
 if __name__ == '__main__':
