@@ -62,6 +62,7 @@ from helio_drivers.sim.truth import true_sun_focus_joints
 from helio_drivers.sim.world import SimSettings, SimWorld
 from helio_optics.bench_report import add_json_option, median_call_ms, report
 from helio_optics.config_files import config_path
+from helio_optics.node_kit.process_tuning import keep_large_buffers
 from helio_optics.node_kit.process_tuning import single_threaded_numerics
 from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
 from helio_optics.rig_kinematics import RigParameters
@@ -266,6 +267,11 @@ class NodeRun:
         from helio_drivers.sim.devices import DeviceSettings
 
         self._rclpy = rclpy
+        # as the graph's image subscriber (spot_detector) does: a taken 0.9 MB frame reuses
+        # freed heap instead of page-faulting fresh pages in (a subscriber's receipt of an
+        # RGB frame 2.6 -> 1.3 ms on a slow machine); said here, not left to the SimWorld
+        # built below only to aim with
+        keep_large_buffers()
         self.ports = (os.path.join(directory, 'dobot'), os.path.join(directory, 'servo'))
         command = [sys.executable, '-m', 'helio_drivers.sim.world_node', '--ros-args',
                    '-p', 'real_time_factor:=0.0', '-p', f'dobot_port:={self.ports[0]}',
