@@ -5,7 +5,8 @@ import os
 import signal
 
 from helio_control.bringup import simulated_graph, start_graph
-from helio_optics.node_kit.in_process_graph import InProcessGraph
+from helio_msgs.msg import DeviceStatus
+from helio_optics.node_kit.in_process_graph import InProcessGraph, TRANSIENT_LOCAL_QOS
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -40,3 +41,16 @@ def graph_of_processes(tmp_path, nodes, overrides=None, namespace='',
             yield group, client
         finally:
             group.stop()
+
+
+def wait_for_devices(graph, timeout, devices=('dobot', 'servo')):
+    """
+    Wait until each driver's latched `<device>/status` says it holds its (emulated) device.
+
+    A driver started before the world retries the world's pty with a growing delay (0.2 s,
+    doubled each time: ``reconnect_initial``), so it connects up to 3.2 s after the world
+    opened its ports; a test that counts the drivers' output waits for this first.
+    """
+    for device in devices:
+        graph.collect(DeviceStatus, f'{device}/status', TRANSIENT_LOCAL_QOS) \
+            .wait_for_message(lambda status: status.connected, timeout)

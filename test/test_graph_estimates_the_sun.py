@@ -13,12 +13,12 @@ The same graph runs again under a namespace (``/rig1``): relative names keep it 
 
 import math
 
-from conftest import graph_of_processes
+from conftest import graph_of_processes, wait_for_devices
 from geometry_msgs.msg import Vector3Stamped
 from helio_control.fixture_bags import move_joints
 from helio_control.sun_sweep import sweep_poses, view_points
 from helio_msgs.action import MoveArm, MoveWrist
-from helio_msgs.msg import DeviceStatus, SpotObservation
+from helio_msgs.msg import SpotObservation
 from helio_msgs.srv import EstimateSun
 from helio_optics.node_kit.conversions import camera_from_info, point_to_array
 from helio_optics.node_kit.conversions import stamp_to_seconds
@@ -49,9 +49,7 @@ class GraphClient:
         self.camera_info = graph.collect(CameraInfo, 'rgb/camera_info',
                                          qos_profile_sensor_data)
         self.estimate = graph.helper.create_client(EstimateSun, 'estimate_sun')
-        for device in ('dobot', 'servo'):     # the drivers hold their (emulated) devices
-            graph.collect(DeviceStatus, f'{device}/status', TRANSIENT_LOCAL_QOS) \
-                .wait_for_message(lambda status: status.connected, START_TIMEOUT)
+        wait_for_devices(graph, START_TIMEOUT)
 
     def true_sun(self, at=None):
         """

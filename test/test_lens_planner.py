@@ -19,10 +19,9 @@ order a painting uses them:
 import math
 import time
 
-from conftest import graph_of_processes
+from conftest import graph_of_processes, wait_for_devices
 from geometry_msgs.msg import PointStamped, PoseStamped, Vector3Stamped
 from helio_msgs.action import CalibrateFocus, CalibrateWorld, FocusLens, SweepSun
-from helio_msgs.msg import DeviceStatus
 from helio_optics.node_kit.conversions import point_to_array, pose_to_matrix
 from helio_optics.node_kit.conversions import stamp_to_seconds
 from helio_optics.node_kit.in_process_graph import TRANSIENT_LOCAL_QOS
@@ -79,9 +78,7 @@ class Planner:
 
     def __init__(self, graph):
         self.graph = graph
-        for device in ('dobot', 'servo'):
-            graph.collect(DeviceStatus, f'{device}/status', TRANSIENT_LOCAL_QOS) \
-                .wait_for_message(lambda status: status.connected, 60.0)
+        wait_for_devices(graph, 60.0)
         self.truth_world = graph.collect(PoseStamped, 'sim/truth/world_pose',
                                          TRANSIENT_LOCAL_QOS)
         self.truth_sun = graph.collect(Vector3Stamped, 'sim/truth/sun_direction',

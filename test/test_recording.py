@@ -16,7 +16,7 @@ import signal
 import subprocess
 import sys
 
-from conftest import graph_of_processes
+from conftest import graph_of_processes, wait_for_devices
 from helio_control.bag_files import bag_file, is_complete, salvage_records
 from helio_control.bringup import node_environment
 from helio_control.recorder import Recorder
@@ -60,7 +60,12 @@ def record_graph(tmp_path, stats_to_wait_for, kill=False):
     recorder was stopped or killed [ns].
     """
     bag = str(tmp_path / 'bag')
+    counted = {topic for topic, (_, least) in EXPECTED.items() if least > 0}
     with graph_of_processes(tmp_path, NODES, WORLD) as (_, graph):
+        # the drivers' joint_states are among what is counted: recorded from when both
+        # drivers hold their devices (on a slow machine the world opened its ports 3.9 s
+        # after the drivers started, and they connected 2.3 s later, as the recording ended)
+        wait_for_devices(graph, 60.0)
         clock = graph.collect(Clock, '/clock', QoSProfile(
             depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
         stats = graph.collect(ThermalStats, 'thermal/stats',
@@ -70,11 +75,13 @@ def record_graph(tmp_path, stats_to_wait_for, kill=False):
                             log_dir=str(tmp_path / 'logs'), chunk_period=0.5,
                             chunk_size_bytes=256 << 10, env=node_environment()).start()
         try:
-            # counted from when the recorder hears thermal/stats (the test's own
-            # subscription is the other one): the world may run far ahead of its start-up
             recorder.start_wait(60.0)
-            graph.wait_until(lambda: graph.helper.count_subscribers('/thermal/stats') >= 2,
-                             60.0, 'the recorder subscribing to thermal/stats')
+            # counted from when the recorder subscribed to every topic counted below (the
+            # world may run far ahead of its start-up): it finds them by discovery, every
+            # 0.5 s, and on a slow machine the drivers' topics showed up there 2 s after the
+            # world's, as a short recording ended (3 joint_states)
+            graph.wait_until(lambda: recorder_subscribed(graph, counted), 60.0,
+                             f'the recorder subscribing to {sorted(counted)}')
             stats.wait_for_count(len(stats.messages) + stats_to_wait_for, 120.0)
             # and until chunks are on disk: the recorder discovers topics and closes chunks on
             # its own wall-clock schedule, which a 4x world can outrun
@@ -87,6 +94,13 @@ def record_graph(tmp_path, stats_to_wait_for, kill=False):
             else:
                 recorder.stop()
     return bag, last_clock
+
+
+def recorder_subscribed(graph, topics):
+    """Tell whether the graph sees the recorder node subscribed to each of `topics`."""
+    return all(any(info.node_name == 'recorder'
+                   for info in graph.helper.get_subscriptions_info_by_topic(topic))
+               for topic in topics)
 
 
 def chunks_on_disk(bag):
@@ -226,6 +240,7 @@ def test_record_and_replay_refuse_bad_input_in_one_line(arguments, message):
 def test_sigint_closes_the_bag(tmp_path):
     """The recorder stopped by SIGINT (Ctrl-C) writes summary and footer."""
     bag = str(tmp_path / 'bag')
+    counted = {topic for topic, (_, least) in EXPECTED.items() if least > 0}
     recorder = Recorder(bag, log_dir=str(tmp_path / 'logs')).start()
     recorder.process.signal(signal.SIGINT)
     recorder.process.process.wait(30.0)
