@@ -240,7 +240,6 @@ def test_record_and_replay_refuse_bad_input_in_one_line(arguments, message):
 def test_sigint_closes_the_bag(tmp_path):
     """The recorder stopped by SIGINT (Ctrl-C) writes summary and footer."""
     bag = str(tmp_path / 'bag')
-    counted = {topic for topic, (_, least) in EXPECTED.items() if least > 0}
     recorder = Recorder(bag, log_dir=str(tmp_path / 'logs')).start()
     recorder.process.signal(signal.SIGINT)
     recorder.process.process.wait(30.0)
