@@ -32,10 +32,19 @@ the device stands still, for up to ``stop_timeout``; the result says whether the
 confirmed. Every (re)connection stops the device first too (``configure_device``), so a
 move the driver lost track of while the link was down does not go on.
 
-Time: a move is limited by ``move_timeout`` on the node's clock (simulated seconds under
-``use_sim_time``) and by ``move_wall_timeout`` of wall time (a stopped /clock cannot hold
-a goal); the device is polled every ``poll_period`` of wall time (see
-``device_support.MoveDeadline``).
+Time (issue 31): beside a simulated world the driver is clocked by ``/clock``. The joints are
+read and published every ``1/joint_state_rate`` of the node clock (simulated seconds under
+``use_sim_time``), stamped on it, and every such period of wall time as well, whichever comes
+first (``device_support.TwoClockSchedule``): the world steps the emulated devices on simulated
+time, and nodes match images to joints within tolerances of simulated time, so the joint
+states must be as dense in simulated time on a busy machine as on an idle one; the wall side
+keeps them flowing while /clock pauses. Every /clock tick wakes the device thread (a jump
+callback of the node clock), so a running move is also polled once per simulated step, not
+only every ``poll_period`` of wall time. A move is limited by ``move_timeout`` on the node's
+clock and by ``move_wall_timeout`` of wall time (a stopped /clock cannot hold a goal; see
+``device_support.MoveDeadline``). The serial link's reply ``timeout`` and the reconnect
+backoff stay on the wall clock: they are about the device, which answers in wall time. On a
+real rig the node clock is the system clock and all of this is a plain wall-clock period.
 
 Subclasses declare their own parameters, then call ``start_device()``, and implement the
 device hooks: ``configure_device``, ``read_joints``, ``read_alarms``, ``plan_move``,
@@ -46,13 +55,15 @@ from dataclasses import dataclass
 import threading
 import time
 
-from helio_drivers.device_support import device_status, MoveDeadline
+from helio_drivers.device_support import device_status, MoveDeadline, TwoClockSchedule
 from helio_drivers.serial_link import (
     AUTO_PORT, DeviceError, find_port, LinkError, parse_usb_id, PortBusyError,
     ReconnectBackoff)
 from helio_msgs.msg import DeviceStatus
 from helio_optics.node_kit.parameters import declare
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.clock import JumpThreshold
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
@@ -139,7 +150,9 @@ class DeviceActionNode(Node):
         retries = declare(self, 'retries', 2, 'Extra attempts after a bad or missing reply.',
                           0, 10)
         rate = declare(self, 'joint_state_rate', 20.0,
-                       'Rate of joint polling and /joint_states [Hz].', 0.1, 200.0)
+                       'Rate of joint polling and /joint_states, on the node clock (simulated '
+                       'time under use_sim_time) and on the wall clock, whichever is first '
+                       '[Hz].', 0.1, 200.0)
         self.joint_period = 1.0 / rate
         self.status_period = declare(self, 'status_period', 1.0,
                                      f'Period of {spec.device}/status and alarm polling [s].',
@@ -185,6 +198,12 @@ class DeviceActionNode(Node):
             DeviceStatus, f'{spec.device}/status',
             QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        # Every /clock tick wakes the device thread: joint states and move polls follow
+        # simulated time (no effect on a clock that is not driven by /clock)
+        self._clock_tick = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=Duration(nanoseconds=1), min_backward=None,
+                          on_clock_change=False),
+            post_callback=lambda _jump: self._wake.set())
         # Triggered by the device thread when a job's answer is ready: wakes the executor,
         # which then resumes the waiting coroutine.
         self._answer_ready = self.create_guard_condition(lambda: None)
@@ -344,14 +363,15 @@ class DeviceActionNode(Node):
     # ---- device thread ----------------------------------------------------------------------
 
     def _device_loop(self):
-        schedule = {'joints': time.monotonic(), 'status': time.monotonic()}
+        schedule = {'joints': TwoClockSchedule(self.joint_period), 'status': time.monotonic()}
         while not self._stopping.is_set():
             self._wake.clear()           # before looking: a wake from now on is not lost
             try:
                 self._device_cycle(schedule)
             except Exception as error:   # a bug must not end the thread and strand a job
                 self._driver_error(error)
-            wake_at = min(schedule.values())
+            # the node clock's side of the joints is woken by /clock (_clock_tick)
+            wake_at = min(schedule['joints'].wall_due_at(), schedule['status'])
             if not self.client.connected:
                 wake_at = min(wake_at, self.backoff.next_attempt_at)
             if self._run is not None:
@@ -382,8 +402,7 @@ class DeviceActionNode(Node):
         run = self._run
         if run is not None:
             self._step_job(run)
-        if self.client.connected and now >= schedule['joints']:
-            schedule['joints'] = now + self.joint_period
+        if self.client.connected and schedule['joints'].due(self._node_now_s(), now):
             try:
                 self._publish_joints()
             except DeviceError as error:     # unplugged, or no answer after every retry
@@ -604,4 +623,5 @@ class DeviceActionNode(Node):
         self.client.close()
         if self.action_server is not None:
             self.action_server.destroy()
+        self._clock_tick.unregister()
         return super().destroy_node()

@@ -60,3 +60,46 @@ class MoveDeadline:
                     f'the node clock advanced only {node_elapsed:.2f} s of its '
                     f'{self.limit_s:.2f} s (is /clock running?)')
         return None
+
+
+class TwoClockSchedule:
+    """
+    A period due on whichever of two clocks reaches it first: the node clock or the wall clock.
+
+    Beside a simulated world (``use_sim_time``) a driver's periodic work (its joint states)
+    must follow simulated time, whatever the machine's load makes of the ratio between the
+    clocks: the world steps its devices on simulated time and a node matches an image to the
+    joints within tolerances of simulated time. The node clock therefore decides. The wall
+    clock decides too, so that a paused /clock (a world holding for a slow consumer, or one
+    stopped) still gets the output every `period` of wall time, stamped with the same
+    simulated instant. On a real rig both clocks run together and this is a plain period.
+
+    Node-clock readings of 0 (no /clock yet) and readings that go backwards (a simulation
+    restarted) re-anchor the node clock's side instead of waiting for the old time to return.
+    """
+
+    def __init__(self, period):
+        """Be due every `period` [s] of either clock, and at once the first time."""
+        if not period > 0.0:
+            raise ValueError(f'period must be > 0 s, got {period}')
+        self.period = float(period)
+        self._node_last = None
+        self._wall_last = None
+
+    def due(self, node_now_s, wall_now_s):
+        """Return whether the work is due at these readings; if so, count it as done."""
+        node_ok = node_now_s > 0.0
+        if self._node_last is not None and node_ok and node_now_s < self._node_last:
+            self._node_last = None                    # the node clock went back: restarted
+        due = (self._wall_last is None
+               or wall_now_s - self._wall_last >= self.period - 1e-9
+               or (node_ok and (self._node_last is None
+                                or node_now_s - self._node_last >= self.period - 1e-9)))
+        if due:
+            self._wall_last = wall_now_s
+            self._node_last = node_now_s if node_ok else None
+        return due
+
+    def wall_due_at(self):
+        """Return the wall time [s] at which the wall clock's side is next due."""
+        return -float('inf') if self._wall_last is None else self._wall_last + self.period

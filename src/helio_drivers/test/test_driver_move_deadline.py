@@ -1,6 +1,6 @@
 """MoveDeadline: move limits on the node clock (sim time) with a wall-clock guard."""
 
-from helio_drivers.device_support import MoveDeadline
+from helio_drivers.device_support import MoveDeadline, TwoClockSchedule
 import pytest
 
 
@@ -38,3 +38,29 @@ def test_no_sim_time_yet_and_a_clock_going_back_re_anchor_instead_of_counting():
 def test_limits_must_be_positive(limits):
     with pytest.raises(ValueError, match='must be positive'):
         MoveDeadline(*limits, node_now_s=0.0, wall_now_s=0.0)
+
+
+def test_joint_states_follow_a_fast_sim_clock_and_a_paused_one_alike():
+    """TwoClockSchedule: due every period of simulated time, and of wall time while paused."""
+    schedule = TwoClockSchedule(0.05)
+    assert schedule.due(0.0, 0.0)                      # at once, before any /clock
+    # a world at 50x real time: 0.1 s simulated steps 2 ms of wall time apart
+    ticks = [schedule.due(1000.0 + 0.1 * i, 0.002 * (i + 1)) for i in range(50)]
+    assert all(ticks)                                  # every step: 10 per simulated second
+    assert not schedule.due(1004.9, 0.101)             # the same instant again: not due
+    # the world paused (holding for a slow consumer): due every 0.05 s of wall time
+    paused = [schedule.due(1004.9, 0.101 + 0.01 * i) for i in range(1, 11)]
+    assert paused == [False, False, False, False, True] * 2
+    # a world slower than real time: every 0.05 s of either clock, whichever is first
+    schedule = TwoClockSchedule(0.05)
+    assert schedule.due(10.0, 0.0)
+    assert not schedule.due(10.02, 0.04) and schedule.due(10.025, 0.05)
+
+
+def test_a_restarted_sim_clock_re_anchors_the_schedule():
+    schedule = TwoClockSchedule(0.05)
+    assert schedule.due(500.0, 0.0)
+    assert schedule.due(0.1, 0.001)                    # a new simulation: due at once
+    assert schedule.due(0.15, 0.002) and not schedule.due(0.16, 0.003)
+    with pytest.raises(ValueError):
+        TwoClockSchedule(0.0)

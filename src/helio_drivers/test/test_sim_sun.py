@@ -171,3 +171,25 @@ def test_lockstep_holds_the_world_at_most_lead_ahead_of_its_consumer_and_not_for
     assert lockstep.hold(10.7, 6.5) and not lockstep.hold(10.6, 6.5)
     with pytest.raises(ValueError):
         Lockstep(lead=0.0)
+
+
+def test_lockstep_waits_for_the_slowest_of_several_sources_and_leaves_a_silent_one():
+    lockstep = Lockstep(lead=0.2, timeout=1.0)
+    lockstep.seen(10.0, wall_now=0.0, source='thermal')
+    lockstep.seen(10.0, wall_now=0.0, source='dobot')
+    lockstep.seen(9.7, wall_now=0.0, source='servo')
+    assert lockstep.holding(10.0, 0.1) == ['servo']    # 0.3 s behind the world
+    assert lockstep.holding(9.85, 0.1) == []
+    lockstep.seen(9.9, wall_now=0.2, source='servo')
+    assert lockstep.holding(10.1, 0.3) == []           # every source within the lead
+    lockstep.seen(10.2, wall_now=0.3, source='servo')
+    assert lockstep.holding(10.25, 0.3) == ['dobot', 'thermal']
+    # the Dobot unplugged: it alone goes silent and is left behind after the timeout
+    for wall in (0.5, 0.9, 1.1):
+        lockstep.seen(10.3, wall_now=wall, source='thermal')
+        lockstep.seen(10.3, wall_now=wall, source='servo')
+    assert lockstep.holding(10.4, 0.9) == ['dobot'] and not lockstep.left_behind(0.9)
+    assert lockstep.holding(10.4, 1.1) == [] and lockstep.silent(1.1) == ['dobot']
+    lockstep.seen(10.4, wall_now=1.2, source='dobot')     # plugged back in: held again
+    assert not lockstep.left_behind(1.2) and lockstep.holding(10.7, 1.2) == ['dobot', 'servo',
+                                                                             'thermal']

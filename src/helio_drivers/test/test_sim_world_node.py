@@ -143,6 +143,7 @@ def test_clouds_and_unplugged_cables_are_set_at_run_time_and_the_rest_is_refused
             rgb_rate=0.0)))
         clock = graph.collect(Clock, '/clock', QoSProfile(depth=10))
         clock.wait_for_count(2, timeout=60.0)
+        start = node.world.clock.start.timestamp()
         clear = node.world.dni_now()
         assert clear > 0.0
         now = node.world.time
@@ -164,6 +165,22 @@ def test_clouds_and_unplugged_cables_are_set_at_run_time_and_the_rest_is_refused
         assert not result.successful and "unknown device(s) ['arm']" in result.reason
         result, = node.set_parameters([Parameter('unplugged', value=[''])])
         assert result.successful and (tmp_path / 'dobot').exists()
+        # an unplugged camera publishes nothing, its images nor its camera_info, until back
+        thermal = graph.collect(CameraInfo, 'thermal/camera_info', qos_profile_sensor_data)
+        thermal.wait_for_count(1, timeout=60.0)
+        result, = node.set_parameters([Parameter('unplugged', value=['thermal_camera'])])
+        assert result.successful, result.reason
+        unplugged_at = node.world.time
+        count = len(clock.messages)
+        clock.wait_for_count(count + 10, timeout=60.0)      # 1 s of simulated time on
+        graph.wait_until(lambda: node.world.time > unplugged_at + 1.0, 60.0, 'a second more')
+        late = [m for m in thermal.messages
+                if stamp_to_seconds(m.header.stamp) - start > unplugged_at + 0.2]
+        assert not late, f'{len(late)} thermal camera_info after the unplug'
+        result, = node.set_parameters([Parameter('unplugged', value=[''])])
+        assert result.successful
+        count = len(thermal.messages)
+        thermal.wait_for_count(count + 2, timeout=60.0)     # plugged back in
         result, = node.set_parameters([Parameter('real_time_factor', value=0.0)])
         assert result.successful and node._pacer.real_time_factor == 0.0
         result, = node.set_parameters([Parameter('dni', value=500.0)])
@@ -213,3 +230,42 @@ def test_a_world_in_lockstep_waits_for_its_consumer_and_paces_itself_once_it_is_
         # held for the timeout, then paced at 2x: 3 s simulated take >= timeout + 1.5 s
         assert elapsed >= timeout + 3.0 / fallback - 0.2, f'{elapsed:.2f} s wall: ran free'
         assert node._was_left_behind
+
+
+def test_a_world_in_lockstep_never_runs_ahead_of_the_drivers_joint_states(tmp_path):
+    # Two stand-in drivers answer /clock with joint states stamped on it, as the drivers do
+    # under use_sim_time (one every simulated step); one answers each tick only after a
+    # wall-clock delay, as a driver starved of the CPU. The world waits for the slower: it
+    # never gets more than lockstep_lead (+ one step) past that driver's newest stamp.
+    from rclpy.time import Time
+    from sensor_msgs.msg import JointState
+    lead = 0.2
+    with InProcessGraph('probe') as graph:
+        node = graph.add(SimWorldNode(**graph.node_options(
+            real_time_factor=0.0, dobot_port=str(tmp_path / 'dobot'),
+            servo_port=str(tmp_path / 'servo'), rig_file=default_rig_file(), flux_rays=5000,
+            rgb_rate=0.0, thermal_rate=0.0, lockstep_topic='', lockstep_lead=lead,
+            lockstep_timeout=5.0)))
+        joints = graph.helper.create_publisher(JointState, 'joint_states', 10)
+        slow_stamps, ahead = [], []
+
+        def answer(clock, names):
+            message = JointState()
+            message.header.stamp = clock.clock
+            message.name = list(names)
+            message.position = [0.0] * len(names)
+            joints.publish(message)
+
+        def on_clock(clock):
+            answer(clock, ['dobot_j1', 'dobot_j2', 'dobot_j3', 'dobot_j4'])
+            stamp = Time.from_msg(clock.clock).nanoseconds * 1e-9
+            if slow_stamps:                 # how far the world is past the slow one's newest
+                ahead.append(node.world.clock.nanoseconds() * 1e-9 - slow_stamps[-1])
+            time.sleep(0.02)                # the slow driver: 20 ms of wall time a tick
+            answer(clock, ['lens_yaw', 'lens_pitch'])
+            slow_stamps.append(stamp)
+
+        graph.helper.create_subscription(Clock, '/clock', on_clock, QoSProfile(depth=1))
+        graph.wait_until(lambda: len(slow_stamps) > 60, timeout=120.0, what='60 answers')
+        # (free, the world would step a tick every millisecond or two: 1-2 s ahead)
+        assert max(ahead[-40:]) <= lead + node.world.settings.step + 1e-6, ahead[-40:]

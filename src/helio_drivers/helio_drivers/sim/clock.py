@@ -104,36 +104,47 @@ class Pacer:
 
 class Lockstep:
     """
-    Keep a world that runs faster than real time from outrunning its slowest consumer.
+    Keep a world that runs faster than real time from outrunning the graph that reads it.
 
-    The consumer's outputs carry the simulated stamp of the input they answer (e.g.
-    ``thermal/stats`` for each thermal image). ``hold`` says to wait while the world is more
-    than `lead` simulated seconds ahead of the newest such stamp, as a robot's real sensors
-    never run ahead of its software. A consumer silent for `timeout` wall seconds (stopped,
-    crashed) is left behind until it answers again, so it cannot freeze the world; the world
-    node then paces itself at real time (``left_behind``), as the world of a real robot whose
-    perception stopped would go on.
+    Each consumer (a `source`: the thermal monitor's ``thermal/stats``, each driver's
+    ``joint_states``) stamps its outputs with the simulated instant of the input they answer
+    or of the node clock they were read on. ``hold`` says to wait while the world is more
+    than `lead` simulated seconds ahead of the newest stamp of any source, as a robot's real
+    sensors and devices never run ahead of the software reading them. A source silent for
+    `timeout` wall seconds (stopped, crashed, unplugged) is left behind until it answers
+    again, so it cannot freeze the world; the world node then paces itself at real time
+    (``left_behind``), as the world of a real robot whose perception stopped would go on.
     """
 
     def __init__(self, lead=0.2, timeout=1.0):
-        """Allow `lead` [s simulated] ahead; give up on a consumer after `timeout` [s wall]."""
+        """Allow `lead` [s simulated] ahead; give up on a source after `timeout` [s wall]."""
         if not (lead > 0.0 and timeout > 0.0):
             raise ValueError(f'lockstep lead and timeout must be > 0, got {lead}, {timeout}')
         self.lead, self.timeout = float(lead), float(timeout)
-        self._stamp = None
-        self._heard = -math.inf
+        self._stamps = {}            # source -> newest stamp answered [s simulated]
+        self._heard = {}             # source -> wall time it was last heard [s]
 
-    def seen(self, stamp, wall_now):
-        """Note a consumer output answering the input stamped `stamp` [s simulated]."""
-        self._stamp = stamp if self._stamp is None else max(self._stamp, stamp)
-        self._heard = wall_now
+    def seen(self, stamp, wall_now, source=''):
+        """Note an output of `source` answering the simulated instant `stamp` [s]."""
+        newest = self._stamps.get(source)
+        self._stamps[source] = stamp if newest is None else max(newest, stamp)
+        self._heard[source] = wall_now
 
     def hold(self, sim_now, wall_now):
         """Return whether the world should wait before simulating past `sim_now` [s]."""
-        if self._stamp is None or self.left_behind(wall_now):
-            return False
-        return sim_now - self._stamp > self.lead
+        return bool(self.holding(sim_now, wall_now))
+
+    def holding(self, sim_now, wall_now):
+        """Return the sources the world waits for at `sim_now` [s] (sorted)."""
+        return sorted(source for source, stamp in self._stamps.items()
+                      if sim_now - stamp > self.lead
+                      and wall_now - self._heard[source] <= self.timeout)
 
     def left_behind(self, wall_now):
-        """Return whether a consumer that answered before has been silent past the timeout."""
-        return self._stamp is not None and wall_now - self._heard > self.timeout
+        """Return whether a source that answered before has been silent past the timeout."""
+        return bool(self.silent(wall_now))
+
+    def silent(self, wall_now):
+        """Return the sources silent past the timeout (sorted)."""
+        return sorted(source for source, heard in self._heard.items()
+                      if wall_now - heard > self.timeout)

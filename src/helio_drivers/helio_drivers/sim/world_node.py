@@ -37,16 +37,22 @@ every other parameter is read-only after start:
   long heating, real time to watch a retreat);
 - ``unplugged``: device names (``dobot``, ``servo``) whose USB cable is out: their
   pseudo-terminal is closed and its link removed, as on an unplug; taking a name out plugs
-  it back in (a new pty behind the same path).
+  it back in (a new pty behind the same path). ``thermal_camera`` and ``rgb_camera``: that
+  camera publishes nothing (image and camera_info) until it is plugged back in, as a USB
+  camera that was pulled out or froze.
 
-Lockstep: a world faster than real time holds its simulated time at most ``lockstep_lead``
-ahead of the newest stamp on ``lockstep_topic`` (``thermal/stats``: the thermal monitor's
-answer to each thermal image), as real sensors never run ahead of the software reading
-them; otherwise, on 2 busy cores, the painter's fire-safety watchdog (0.5 s of simulated
-time without thermal data) would trip on a world that merely ran ahead. A consumer silent
-for ``lockstep_timeout`` of wall time is left behind, so a stopped one cannot freeze the
-world; the world then runs at ``lockstep_fallback_factor`` (real time), not as fast as it
-can, which would outrun the drivers' wall-clock polling and starve its own emulators.
+Lockstep (issue 31): a world faster than real time holds its simulated time at most
+``lockstep_lead`` ahead of the newest stamp on ``lockstep_topic`` (``thermal/stats``: the
+thermal monitor's answer to each thermal image) and, with ``lockstep_joint_states``, of the
+newest ``joint_states`` of each driver (each publisher's set of joint names is a source;
+the drivers read their device on every /clock tick and stamp on the node clock). Real
+sensors and devices never run ahead of the software reading them, and so the graph's
+decisions depend on simulated time whatever the machine's load does to the ratio of the
+clocks: otherwise, on 2 busy cores, the painter's fire-safety watchdog (0.5 s of simulated
+time without thermal data) would trip on a world that merely ran ahead, and images would
+find no joint states within their tolerance. A source silent for ``lockstep_timeout`` of
+wall time (stopped, unplugged) is left behind, so it cannot freeze the world; the world then
+runs at ``lockstep_fallback_factor`` (real time), not as fast as it can.
 
 Topic names are relative, so the world runs under a namespace with its rig's nodes.
 At shutdown it writes ``canvas.png`` (the burnt panel as a person sees it),
@@ -81,7 +87,7 @@ from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from rclpy.qos import ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, JointState
 
 
 @dataclass(frozen=True)
@@ -193,6 +199,7 @@ class SimWorldNode(Node):
 
     # the parameters that can change at run time
     RUNTIME = ('cloud_schedule', 'unplugged', 'real_time_factor')
+    CAMERAS = ('rgb_camera', 'thermal_camera')   # `unplugged` names of the cameras
     RGB_FRAMES_IN_FLIGHT = 2     # on the RGB thread, at most (rgb_thread)
 
     def __init__(self, **kwargs):
@@ -266,10 +273,11 @@ class SimWorldNode(Node):
         self.truth_light_pub = self.create_publisher(LightTruth, 'sim/truth/light', TRUTH_QOS)
         self.truth_rgb_pub = self.create_publisher(PoseStamped, 'sim/truth/rgb_pose',
                                                    TRUTH_QOS)
+        self._cameras_out = set()
         self._plug(declare(
             self, 'unplugged', [''],
-            "Devices whose cable is out ('dobot', 'servo'); set at run time to unplug and "
-            'plug back in.', dynamic=True))
+            "Devices whose cable is out ('dobot', 'servo', 'rgb_camera', 'thermal_camera'); set "
+            'at run time to unplug and plug back in.', dynamic=True))
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._next = {'rgb': 0.0, 'thermal': 0.0, 'canvas': 0.0, 'truth': 0.0}
         # published serialised, restamped: no message object per step
@@ -305,6 +313,11 @@ class SimWorldNode(Node):
             self.create_subscription(
                 ThermalStats, lockstep_topic, self._on_lockstep,
                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        if declare(self, 'lockstep_joint_states', True,
+                   "Hold the world at most lockstep_lead ahead of each driver's newest "
+                   'joint_states too (each set of joint names is one source)'):
+            self.create_subscription(JointState, 'joint_states', self._on_joint_states,
+                                     QoSProfile(depth=10))
         self._rgb_jobs = collections.deque()     # RGB frames developing on the RGB thread
         self._rgb_thread = concurrent.futures.ThreadPoolExecutor(
             max_workers=1, thread_name_prefix='sim-rgb') if declare(
@@ -358,10 +371,16 @@ class SimWorldNode(Node):
         """Unplug the named devices and plug the others back in (ValueError: unknown name)."""
         names = {name for name in unplugged if name}
         devices = {'dobot': self.devices.dobot, 'servo': self.devices.servo}
-        unknown = names - set(devices)
+        unknown = names - set(devices) - set(self.CAMERAS)
         if unknown:
             raise ValueError(f'unplugged: unknown device(s) {sorted(unknown)}; the devices are '
-                             f'{sorted(devices)}')
+                             f'{sorted([*devices, *self.CAMERAS])}')
+        cameras_out = names & set(self.CAMERAS)
+        for name in sorted(cameras_out ^ self._cameras_out):
+            self.get_logger().warning(
+                f'{name} {"unplugged" if name in cameras_out else "plugged back in"} at '
+                f'{self.world.time:.2f} s')
+        self._cameras_out = cameras_out
         for name, device in devices.items():
             if name in names and device.connected:
                 device.disconnect()
@@ -372,8 +391,15 @@ class SimWorldNode(Node):
 
     # ------------------------------------------------------------------ loop
     def _on_lockstep(self, message):
-        self._lockstep.seen(stamp_to_seconds(message.header.stamp), time.monotonic())
+        self._lockstep.seen(stamp_to_seconds(message.header.stamp), time.monotonic(),
+                            'thermal')
         self._lockstep_heard.set()
+
+    def _on_joint_states(self, message):
+        if message.name:
+            self._lockstep.seen(stamp_to_seconds(message.header.stamp), time.monotonic(),
+                                ','.join(message.name))
+            self._lockstep_heard.set()
 
     def _run(self):
         """Step the world at the real-time factor and publish what is due."""
@@ -408,11 +434,12 @@ class SimWorldNode(Node):
             if left_behind:
                 self._left_behind_pacer.set_real_time_factor(
                     self._left_behind_pacer.real_time_factor)      # restart its reference
+                silent = ', '.join(self._lockstep.silent(time.monotonic()))
                 self.get_logger().warning(
-                    f'lockstep_topic silent for {self._lockstep.timeout:g} s: running at '
+                    f'lockstep: {silent} silent for {self._lockstep.timeout:g} s: running at '
                     f'{self._left_behind_pacer.real_time_factor:g}x real time until it answers')
             else:
-                self.get_logger().info('lockstep_topic answers again: in lockstep')
+                self.get_logger().info('lockstep: every source answers again: in lockstep')
         return self._left_behind_pacer if left_behind else self._pacer
 
     def _stamp(self):
@@ -428,9 +455,9 @@ class SimWorldNode(Node):
     def _publish_due(self):
         stamp = self._stamp()
         self.clock_pub.publish(restamped(self._clock_bytes, stamp))
-        if self._due('thermal', self.thermal_rate):
+        if self._due('thermal', self.thermal_rate) and 'thermal_camera' not in self._cameras_out:
             self._publish_frame(self._thermal_topics, self.world.thermal_image, stamp)
-        if self._due('rgb', self.rgb_rate):
+        if self._due('rgb', self.rgb_rate) and 'rgb_camera' not in self._cameras_out:
             self._publish_rgb(stamp)
             self.truth_rgb_pub.publish(restamped(self._rgb_pose_bytes(), stamp))
         if self._due('canvas', self.canvas_rate) and self.canvas_pub.get_subscription_count():
