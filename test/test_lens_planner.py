@@ -117,10 +117,11 @@ def planner(tmp_path_factory):
     tmp_path = tmp_path_factory.mktemp('lens_planner')
     rig = {'rig_file': wrong_rig_file(tmp_path)}
     site = {'site_file': site_elsewhere_file(tmp_path)}
-    # joint_state_max_age 10 ms: the drivers publish every 50 ms of wall time, 200 ms of this
-    # world's time, so every goal's present joints are judged by their wall-clock receipt
-    # (joint_state_max_wall_age), as when a world running free outpaces the drivers
-    overrides = {'sim_world': {'real_time_factor': 4.0, 'flux_rays': 20000},
+    # joint_state_max_age 10 ms: the drivers publish every simulated step (100 ms), so every
+    # goal's present joints are judged by their wall-clock receipt (joint_state_max_wall_age),
+    # the lens planner's path for a clock that runs ahead of the joint states. The world runs
+    # free: in lockstep with the drivers and the thermal monitor (issue 31)
+    overrides = {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000},
                  'spot_detector': rig, 'sun_estimator': {**rig, **site},
                  'lens_planner': {**rig, **site, 'joint_state_max_age': 0.01,
                                   'calibration_dir': str(tmp_path / 'calibration')}}

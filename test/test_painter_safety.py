@@ -7,9 +7,9 @@ and ``sim/canvas``: the char map), never by what the painter says about itself:
 
 - a complete 30 s cloud (``cloud_schedule`` set on ``sim_world`` at run time) is waited out
   and the dot is finished to its N_p target;
-- a stale thermal stream (``thermal_monitor`` stopped with SIGSTOP), an unplugged Dobot
-  (``unplugged`` on ``sim_world``: its pty closes as on a USB unplug) and a cancel each put
-  the focus off the wood within 0.5 s of simulated time;
+- a stale thermal stream (the thermal camera unplugged: ``unplugged`` on ``sim_world``), an
+  unplugged Dobot (its pty closes as on a USB unplug) and a cancel each put the focus off
+  the wood within 0.5 s of simulated time;
 - the painter killed (SIGKILL) mid-painting: the lens planner's focus lease puts the focus
   off the wood within the lease (1 s) plus 0.5 s, and the same goal sent again to a new
   painter completes the picture with no dot lost and none burnt twice.
@@ -255,25 +255,24 @@ def _painting_interrupted(rig, name, y, interrupt, restore=lambda: None):
 
 
 def test_a_stale_thermal_stream_puts_the_focus_off_the_wood_within_half_a_second(rig):
-    thermal = rig.process('thermal_monitor')
-
-    def stop_thermal():
-        thermal.signal(signal.SIGSTOP)
+    # The thermal camera's cable pulled out (the world publishes no thermal frame): the
+    # thermal monitor has nothing to answer. (Not the monitor stopped with SIGSTOP: a process
+    # stopped inside Fast DDS's shared-memory transport can hold its port's lock, and the
+    # drivers' joint states to it then stall too; seen once, as both drivers silent.)
+    def unplug_thermal():
+        rig.set_world(unplugged=['thermal_camera'])
         rig.wait_sim(1.5 * THERMAL_STALE)
         rig.stats.wait_for_count(1, 60.0)
         last = stamp_to_seconds(rig.stats.messages[-1].header.stamp)
         return last + THERMAL_STALE                  # stale from here on (the watchdog)
 
-    def restart_thermal():
+    def plug_thermal():
         count = len(rig.stats.messages)
-        thermal.signal(signal.SIGCONT)
+        rig.set_world(unplugged=[''])
         rig.stats.wait_for_count(count + 1, 60.0)    # answering again: back in lockstep
 
-    try:
-        delay, handle = _painting_interrupted(rig, 'stale', 0.08, stop_thermal,
-                                              restore=restart_thermal)
-    finally:
-        thermal.signal(signal.SIGCONT)                # (again, if anything failed before)
+    delay, handle = _painting_interrupted(rig, 'stale', 0.08, unplug_thermal,
+                                          restore=plug_thermal)
     assert delay <= OFF_BOUND
     result = rig.graph.goal_result(handle, TIMEOUT).result    # it comes back: heated again
     print(f'stale: {result.message}')

@@ -190,6 +190,9 @@ def test_lockstep_waits_for_the_slowest_of_several_sources_and_leaves_a_silent_o
         lockstep.seen(10.3, wall_now=wall, source='servo')
     assert lockstep.holding(10.4, 0.9) == ['dobot'] and not lockstep.left_behind(0.9)
     assert lockstep.holding(10.4, 1.1) == [] and lockstep.silent(1.1) == ['dobot']
+    lockstep.seen(10.4, wall_now=1.2, source='dobot', lead=0.15)   # back, with its own lead
+    assert 'dobot' not in lockstep.holding(10.5, 1.2)
+    assert 'dobot' in lockstep.holding(10.56, 1.2)
     lockstep.seen(10.4, wall_now=1.2, source='dobot')     # plugged back in: held again
     assert not lockstep.left_behind(1.2) and lockstep.holding(10.7, 1.2) == ['dobot', 'servo',
                                                                              'thermal']

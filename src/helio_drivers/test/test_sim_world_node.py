@@ -36,6 +36,7 @@ def test_sim_world_publishes_clock_cameras_canvas_and_truth_on_sim_time(tmp_path
                'rgb_pose': graph.collect(PoseStamped, 'sim/truth/rgb_pose', TRUTH_QOS)}
         for collector in got.values():
             collector.wait_for_count(3, timeout=60.0)
+        got['thermal'].wait_for_count(12, timeout=60.0)
         got = {name: collector.messages for name, collector in got.items()}
         assert (tmp_path / 'dobot').exists() and (tmp_path / 'servo').exists()
         thermal = got['thermal'][-1]
@@ -46,8 +47,13 @@ def test_sim_world_publishes_clock_cameras_canvas_and_truth_on_sim_time(tmp_path
         stamps = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec - start
                   for m in got['thermal']]
         assert 0.0 <= stamps[0] < 1.0
-        assert all(0.05 < b - a < 0.2 + 1e-6 for a, b in zip(stamps, stamps[1:]))
-        assert len(stamps) / (stamps[-1] - stamps[0] + 1.0 / 8.7) == pytest.approx(8.7, rel=0.25)
+        # a frame at the first 0.1 s step at or after each due time: 0.1 or 0.2 s apart; a
+        # best-effort frame this busy process did not take in time leaves a longer gap
+        gaps = [b - a for a, b in zip(stamps, stamps[1:])]
+        assert all(gap > 0.05 for gap in gaps), gaps
+        whole = [gap for gap in gaps if gap < 0.2 + 1e-6]
+        assert len(whole) >= len(gaps) / 2, gaps
+        assert len(whole) / sum(whole) == pytest.approx(8.7, rel=0.25)
         rgb, info = got['rgb'][-1], got['info'][-1]
         assert (rgb.encoding, rgb.width, rgb.height) == ('rgb8', info.width, info.height)
         assert list(info.k) == pytest.approx(node.world.rgb.camera.matrix.ravel().tolist())
@@ -236,15 +242,15 @@ def test_a_world_in_lockstep_never_runs_ahead_of_the_drivers_joint_states(tmp_pa
     # Two stand-in drivers answer /clock with joint states stamped on it, as the drivers do
     # under use_sim_time (one every simulated step); one answers each tick only after a
     # wall-clock delay, as a driver starved of the CPU. The world waits for the slower: it
-    # never gets more than lockstep_lead (+ one step) past that driver's newest stamp.
+    # never gets more than lockstep_joint_lead (+ one step) past that driver's newest stamp.
     from rclpy.time import Time
     from sensor_msgs.msg import JointState
-    lead = 0.2
+    lead = 0.15
     with InProcessGraph('probe') as graph:
         node = graph.add(SimWorldNode(**graph.node_options(
             real_time_factor=0.0, dobot_port=str(tmp_path / 'dobot'),
             servo_port=str(tmp_path / 'servo'), rig_file=default_rig_file(), flux_rays=5000,
-            rgb_rate=0.0, thermal_rate=0.0, lockstep_topic='', lockstep_lead=lead,
+            rgb_rate=0.0, thermal_rate=0.0, lockstep_topic='', lockstep_joint_lead=lead,
             lockstep_timeout=5.0)))
         joints = graph.helper.create_publisher(JointState, 'joint_states', 10)
         slow_stamps, ahead = [], []

@@ -123,12 +123,21 @@ class Lockstep:
         self.lead, self.timeout = float(lead), float(timeout)
         self._stamps = {}            # source -> newest stamp answered [s simulated]
         self._heard = {}             # source -> wall time it was last heard [s]
+        self._leads = {}             # source -> its own lead, where not `lead` [s simulated]
 
-    def seen(self, stamp, wall_now, source=''):
-        """Note an output of `source` answering the simulated instant `stamp` [s]."""
+    def seen(self, stamp, wall_now, source='', lead=None):
+        """
+        Note an output of `source` answering the simulated instant `stamp` [s].
+
+        `lead` [s simulated], if given, replaces the default lead for this source.
+        """
         newest = self._stamps.get(source)
         self._stamps[source] = stamp if newest is None else max(newest, stamp)
         self._heard[source] = wall_now
+        if lead is not None:
+            if not lead > 0.0:
+                raise ValueError(f'lockstep lead must be > 0, got {lead}')
+            self._leads[source] = float(lead)
 
     def hold(self, sim_now, wall_now):
         """Return whether the world should wait before simulating past `sim_now` [s]."""
@@ -137,7 +146,7 @@ class Lockstep:
     def holding(self, sim_now, wall_now):
         """Return the sources the world waits for at `sim_now` [s] (sorted)."""
         return sorted(source for source, stamp in self._stamps.items()
-                      if sim_now - stamp > self.lead
+                      if sim_now - stamp > self._leads.get(source, self.lead)
                       and wall_now - self._heard[source] <= self.timeout)
 
     def left_behind(self, wall_now):

@@ -43,9 +43,10 @@ every other parameter is read-only after start:
 
 Lockstep (issue 31): a world faster than real time holds its simulated time at most
 ``lockstep_lead`` ahead of the newest stamp on ``lockstep_topic`` (``thermal/stats``: the
-thermal monitor's answer to each thermal image) and, with ``lockstep_joint_states``, of the
-newest ``joint_states`` of each driver (each publisher's set of joint names is a source;
-the drivers read their device on every /clock tick and stamp on the node clock). Real
+thermal monitor's answer to each thermal image) and, with ``lockstep_joint_states``, at most
+``lockstep_joint_lead`` ahead of the newest ``joint_states`` of each driver (each
+publisher's set of joint names is a source; the drivers read their device on every /clock
+tick and stamp on the node clock). Real
 sensors and devices never run ahead of the software reading them, and so the graph's
 decisions depend on simulated time whatever the machine's load does to the ratio of the
 clocks: otherwise, on 2 busy cores, the painter's fire-safety watchdog (0.5 s of simulated
@@ -314,10 +315,16 @@ class SimWorldNode(Node):
                 ThermalStats, lockstep_topic, self._on_lockstep,
                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         if declare(self, 'lockstep_joint_states', True,
-                   "Hold the world at most lockstep_lead ahead of each driver's newest "
+                   "Hold the world at most lockstep_joint_lead ahead of each driver's newest "
                    'joint_states too (each set of joint names is one source)'):
             self.create_subscription(JointState, 'joint_states', self._on_joint_states,
                                      QoSProfile(depth=10))
+        # at most one step ahead: a driver's joint states are then never more than two steps
+        # apart in simulated time, within the cameras' 0.3 s joint tolerance
+        self._joint_lead = declare(
+            self, 'lockstep_joint_lead', 0.15,
+            "How far the world may run ahead of a driver's newest joint_states [s simulated]",
+            0.01, 60.0)
         self._rgb_jobs = collections.deque()     # RGB frames developing on the RGB thread
         self._rgb_thread = concurrent.futures.ThreadPoolExecutor(
             max_workers=1, thread_name_prefix='sim-rgb') if declare(
@@ -398,7 +405,7 @@ class SimWorldNode(Node):
     def _on_joint_states(self, message):
         if message.name:
             self._lockstep.seen(stamp_to_seconds(message.header.stamp), time.monotonic(),
-                                ','.join(message.name))
+                                ','.join(message.name), self._joint_lead)
             self._lockstep_heard.set()
 
     def _run(self):
