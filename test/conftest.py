@@ -40,7 +40,10 @@ def graph_of_processes(tmp_path, nodes, overrides=None, namespace='',
         try:
             yield group, client
         finally:
-            group.stop()
+            outcomes = group.stop()
+            late = {label: how for label, how in outcomes.items() if how != 'SIGINT'}
+            if late:        # a node that ignores Ctrl-C costs every test the 10 s wait
+                print(f'\nnodes not stopped by SIGINT: {late}')
 
 
 def wait_for_devices(graph, timeout, devices=('dobot', 'servo')):

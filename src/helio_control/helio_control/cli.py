@@ -529,9 +529,8 @@ def build_parser(action_type=None):
     paint.add_argument('--camera-decimation', type=_positive_int, default=5,
                        help='record every N-th camera message')
     paint.add_argument('--real-time-factor', type=_finite_float, default=6.0,
-                       help='of a started simulated graph (0: as fast as the thermal monitor '
-                            "keeps up; above ~6 the drivers' 20 Hz wall-clock joint states "
-                            'lag the simulated clock)')
+                       help='of a started simulated graph (0: as fast as the graph keeps up, '
+                            'in lockstep with the thermal monitor and the drivers)')
     if action_type is not None:
         add_goal_options(paint, action_type.Goal)
     paint.set_defaults(handler=lambda arguments: command_paint(arguments, action_type))

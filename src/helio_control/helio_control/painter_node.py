@@ -61,7 +61,7 @@ from helio_control.run_journal import goal_to_dict, JournalError, JournalWriter,
 from helio_msgs.action import CalibrateWorld, FocusLens, MoveWrist, PaintPattern, SweepSun
 from helio_msgs.msg import DeviceStatus, FocalCalibration, SpotObservation, SunEstimate
 from helio_msgs.msg import ThermalStats
-from helio_optics.node_kit.awaitables import discovered, FirstOf
+from helio_optics.node_kit.awaitables import discovered, FirstOf, NextTurn
 from helio_optics.node_kit.conversions import point_to_array
 from helio_optics.node_kit.deployment import declare_rig, follow_world_calibration
 from helio_optics.node_kit.parameters import declare
@@ -226,6 +226,7 @@ class PainterNode(Node):
         self.faults = {}
         self._stats_waiters = []
         self._spot_waiters = []
+        self._next_turn = NextTurn(self)
         self._busy = False
         self._thermal_interruptions = 0   # heatings broken off by a stale stream (this goal)
         self._cancel_requested = False
@@ -348,7 +349,9 @@ class PainterNode(Node):
         """Return the next thermal statistics, or None when they are stale (watchdog)."""
         waiter = FirstOf()
         self._stats_waiters.append(waiter)
-        node_timer = self.create_timer(self.thermal_stale, lambda: waiter.offer(None))
+        # stale on the node clock only once the statistics queued meanwhile were taken
+        node_timer = self.create_timer(
+            self.thermal_stale, lambda: self._next_turn.call(lambda: waiter.offer(None)))
         wall_timer = self.create_timer(self.thermal_stale_wall, lambda: waiter.offer(None),
                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
         try:

@@ -14,7 +14,9 @@ why the MultiThreadedExecutor of rclpy 7.1.6 is avoided). These helpers make the
   cannot hold it; raises TimeoutError naming `what`.
 - ``await clock_running(node)``: the node's clock has started (the node-clock waits above
   wait for it first);
-- ``FirstOf``: one Future that any callback may complete (the first result wins).
+- ``FirstOf``: one Future that any callback may complete (the first result wins);
+- ``NextTurn``: run a callable at the executor's next turn, after the messages that are
+  already waiting (a node-clock timeout that must not beat data queued behind a /clock).
 """
 
 import time
@@ -32,6 +34,34 @@ class FirstOf(Future):
             return False
         self.set_result(result)
         return True
+
+
+class NextTurn:
+    """
+    Run callables at the executor's next turn, after the messages already waiting.
+
+    A node-clock timer that fires because a /clock message was taken may be ahead of data
+    sent before that /clock but not yet taken (another writer, another DDS queue): a busy
+    machine delays one more than the other. rclpy's executor takes every ready subscription
+    of a turn before its guard conditions, so a timeout deferred through a guard condition
+    first lets the data that arrived meanwhile through; a FirstOf it completes then counts
+    only if that data did not.
+    """
+
+    def __init__(self, node):
+        """Create the guard condition on `node` (call from the node's thread)."""
+        self._calls = []
+        self._guard = node.create_guard_condition(self._run)
+
+    def call(self, function):
+        """Run `function()` at the executor's next turn."""
+        self._calls.append(function)
+        self._guard.trigger()
+
+    def _run(self):
+        calls, self._calls = self._calls, []
+        for function in calls:
+            function()
 
 
 async def clock_running(node, timeout=60.0):
