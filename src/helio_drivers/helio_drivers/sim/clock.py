@@ -11,7 +11,6 @@ reports the factor achieved.
 """
 
 import datetime
-import math
 import threading
 
 
