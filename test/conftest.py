@@ -51,8 +51,9 @@ def wait_for_devices(graph, timeout, devices=('dobot', 'servo')):
     Wait until each driver's latched `<device>/status` says it holds its (emulated) device.
 
     A driver started before the world retries the world's pty with a growing delay (0.2 s,
-    doubled each time: ``reconnect_initial``), so it connects up to 3.2 s after the world
-    opened its ports; a test that counts the drivers' output waits for this first.
+    doubled each time up to the simulated graph's ``reconnect_max`` of 0.5 s), so it connects
+    up to 0.5 s after the world opened its ports; a test that counts the drivers' output waits
+    for this first.
     """
     for device in devices:
         graph.collect(DeviceStatus, f'{device}/status', TRANSIENT_LOCAL_QOS) \

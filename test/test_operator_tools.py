@@ -12,7 +12,8 @@ import subprocess
 import sys
 
 from helio_control.bringup import hardware_graph, node_entries, node_processes
-from helio_control.bringup import SIMULATED_DEVICE_REPLY_TIMEOUT, simulated_graph
+from helio_control.bringup import SIMULATED_DEVICE_REPLY_TIMEOUT, SIMULATED_RECONNECT_MAX
+from helio_control.bringup import simulated_graph
 from helio_control.cli import build_parser, goal_options
 from helio_control.report import make_report, read_dots_csv
 from helio_control.run_journal import JournalWriter
@@ -234,13 +235,16 @@ def test_the_launch_entries_are_what_the_runner_starts(tmp_path):
     assert all('use_sim_time' not in e['parameters'] for e in hardware)
     assert next(e for e in hardware if e['name'] == 'dobot_driver')['parameters']['port'] == \
         '/dev/ttyUSB7'
-    # the emulated devices answer from a loaded process: their drivers wait longer per reply;
-    # the real devices' drivers keep their configured timeouts
+    # the emulated devices answer from a loaded process: their drivers wait longer per reply,
+    # and retry the world's ptys, which open late, without a real device's long backoff; the
+    # real devices' drivers keep their configured timeouts and backoff
     simulated = node_entries(specs)
     for name in ('dobot_driver', 'servo_driver'):
-        assert next(e for e in simulated if e['name'] == name)['parameters']['timeout'] == \
-            SIMULATED_DEVICE_REPLY_TIMEOUT
-        assert 'timeout' not in next(e for e in hardware if e['name'] == name)['parameters']
+        parameters = next(e for e in simulated if e['name'] == name)['parameters']
+        assert parameters['timeout'] == SIMULATED_DEVICE_REPLY_TIMEOUT
+        assert parameters['reconnect_max'] == SIMULATED_RECONNECT_MAX
+        real = next(e for e in hardware if e['name'] == name)['parameters']
+        assert 'timeout' not in real and 'reconnect_max' not in real
 
 
 def test_the_launch_files_are_installed_and_name_launch_when_it_is_missing():

@@ -43,6 +43,11 @@ DDS_PROFILE_ENV = 'FASTRTPS_DEFAULT_PROFILES_FILE'
 # first move of a graph then failed with "no 2-byte reply within 0.100 s after 3 attempts"
 # (twice in six full test runs, 2026-11-24). The in-process driver tests use 0.5 s too.
 SIMULATED_DEVICE_REPLY_TIMEOUT = 0.5
+# Longest delay between the drivers' attempts to open the emulated devices [s]. The drivers
+# start beside the world, which opens its ptys seconds later (it compiles or loads its
+# kernels first); with a real device's 5 s cap the doubling delays (0.2, 0.4 ... 3.2 s) left
+# a driver up to 3.2 s late. A pty that is not there yet costs a failed open(), nothing more.
+SIMULATED_RECONNECT_MAX = 0.5
 
 
 @dataclass
@@ -128,10 +133,10 @@ def simulated_graph(port_dir, nodes=None, overrides=None):
     """
     dobot_port = os.path.join(port_dir, 'dobot')
     servo_port = os.path.join(port_dir, 'servo')
-    timeout = SIMULATED_DEVICE_REPLY_TIMEOUT
+    link = {'timeout': SIMULATED_DEVICE_REPLY_TIMEOUT, 'reconnect_max': SIMULATED_RECONNECT_MAX}
     wiring = {'sim_world': {'dobot_port': dobot_port, 'servo_port': servo_port},
-              'dobot_driver': {'port': dobot_port, 'timeout': timeout},
-              'servo_driver': {'port': servo_port, 'timeout': timeout}}
+              'dobot_driver': {'port': dobot_port, **link},
+              'servo_driver': {'port': servo_port, **link}}
     return _select(SIMULATED_NODES, 'simulated', wiring, nodes, overrides)
 
 
