@@ -249,12 +249,19 @@ class PainterNode(Node):
         # the lens planner's focus lease (helio_control.focus_lease): while this heartbeat
         # lives, a lens left at the heating distance is the painter's to watch; a painter
         # killed outright stops it, and the lens planner retreats the lens
+        # (issue 31) It beats on both clocks: on the node clock the simulated world holds at
+        # most its lockstep lead ahead of the newest beat, so a painter starved of the CPU
+        # does not leave the lens on the wood for simulated seconds while it cannot watch
+        # (and the lease then does not expire for a painter that is merely slow); on the wall
+        # clock it goes on while /clock pauses.
         self.heartbeat_publisher = self.create_publisher(Header, 'painter/heartbeat', 10)
-        self.create_timer(
-            declare(self, 'heartbeat_period', 0.1,
-                    "Period of painter/heartbeat (wall clock), the lens planner's focus lease "
-                    '[s].', 0.01, 1.0),
-            self._beat, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        heartbeat_period = declare(
+            self, 'heartbeat_period', 0.1,
+            "Period of painter/heartbeat, the lens planner's focus lease, on the node clock "
+            'and on the wall clock [s].', 0.01, 1.0)
+        self.create_timer(heartbeat_period, self._beat)
+        self.create_timer(heartbeat_period, self._beat,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.focus = ActionClient(self, FocusLens, 'focus')
         self.world = ActionClient(self, CalibrateWorld, 'calibrate_world')
         self.sweep = ActionClient(self, SweepSun, 'sweep_sun')

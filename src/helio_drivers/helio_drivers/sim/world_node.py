@@ -46,7 +46,9 @@ Lockstep (issue 31): a world faster than real time holds its simulated time at m
 thermal monitor's answer to each thermal image) and, with ``lockstep_joint_states``, at most
 ``lockstep_joint_lead`` ahead of the newest ``joint_states`` of each driver (each
 publisher's set of joint names is a source; the drivers read their device on every /clock
-tick and stamp on the node clock). Real
+tick and stamp on the node clock), and at most ``lockstep_lead`` ahead of the newest stamp
+on each of ``lockstep_heartbeats`` (``painter/heartbeat``, beating on the node clock: a
+painter starved of the CPU cannot leave the lens on the wood for simulated seconds). Real
 sensors and devices never run ahead of the software reading them, and so the graph's
 decisions depend on simulated time whatever the machine's load does to the ratio of the
 clocks: otherwise, on 2 busy cores, the painter's fire-safety watchdog (0.5 s of simulated
@@ -89,6 +91,7 @@ from rclpy.qos import ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import Header
 
 
 @dataclass(frozen=True)
@@ -319,6 +322,15 @@ class SimWorldNode(Node):
                    'joint_states too (each set of joint names is one source)'):
             self.create_subscription(JointState, 'joint_states', self._on_joint_states,
                                      QoSProfile(depth=10))
+        for topic in declare(
+                self, 'lockstep_heartbeats', ['painter/heartbeat'],
+                'std_msgs/Header topics stamped on the node clock (a controller that must '
+                'watch the world: the painter): the world runs at most lockstep_lead ahead of '
+                "each one's newest stamp ('' : none)"):
+            if topic:
+                self.create_subscription(
+                    Header, topic, lambda message, source=topic: self._on_heartbeat(
+                        message, source), QoSProfile(depth=10))
         # at most one step ahead: a driver's joint states are then never more than two steps
         # apart in simulated time, within the cameras' 0.3 s joint tolerance
         self._joint_lead = declare(
@@ -400,6 +412,10 @@ class SimWorldNode(Node):
     def _on_lockstep(self, message):
         self._lockstep.seen(stamp_to_seconds(message.header.stamp), time.monotonic(),
                             'thermal')
+        self._lockstep_heard.set()
+
+    def _on_heartbeat(self, message, source):
+        self._lockstep.seen(stamp_to_seconds(message.stamp), time.monotonic(), source)
         self._lockstep_heard.set()
 
     def _on_joint_states(self, message):
