@@ -275,3 +275,39 @@ def test_a_world_in_lockstep_never_runs_ahead_of_the_drivers_joint_states(tmp_pa
         graph.wait_until(lambda: len(slow_stamps) > 60, timeout=120.0, what='60 answers')
         # (free, the world would step a tick every millisecond or two: 1-2 s ahead)
         assert max(ahead[-40:]) <= lead + node.world.settings.step + 1e-6, ahead[-40:]
+
+
+def test_a_held_world_sends_its_clock_again_for_a_source_that_missed_it(tmp_path):
+    # A stand-in driver that answers only the /clock messages it receives, and whose first
+    # answer is old (it stamped before it heard the world): without the world sending its
+    # /clock again while it waits, neither would ever move (a system test's graph sat at
+    # 0.4 s of simulated time for 120 s so). lockstep_timeout is long: nothing leaves the
+    # stand-in behind meanwhile.
+    from builtin_interfaces.msg import Time as StampMsg
+    from sensor_msgs.msg import JointState
+    with InProcessGraph('probe') as graph:
+        node = graph.add(SimWorldNode(**graph.node_options(
+            real_time_factor=0.0, dobot_port=str(tmp_path / 'dobot'),
+            servo_port=str(tmp_path / 'servo'), rig_file=default_rig_file(), flux_rays=5000,
+            rgb_rate=0.0, thermal_rate=0.0, lockstep_topic='', lockstep_timeout=60.0,
+            lockstep_resend=0.05)))
+        joints = graph.helper.create_publisher(JointState, 'joint_states', 10)
+        answers = []
+
+        def answer(stamp):
+            message = JointState(name=['lens_yaw', 'lens_pitch'], position=[0.0, 0.0])
+            message.header.stamp = stamp
+            joints.publish(message)
+            answers.append(stamp_to_seconds(stamp))
+
+        start = node.world.clock.start.timestamp()
+        graph.wait_until(lambda: node.world.time > 0.5, 60.0, 'the world running free')
+        answer(StampMsg(sec=int(start)))           # the world's first instant: far behind
+        graph.wait_until(lambda: node.resends > 0, 60.0, 'the world held, sending again')
+        held_at = node.world.time
+        graph.helper.create_subscription(Clock, '/clock', lambda c: answer(c.clock),
+                                         QoSProfile(depth=1))
+        graph.wait_until(lambda: node.world.time > held_at + 2.0, 60.0,
+                         'the world going on in lockstep with the late source')
+        # in lockstep from then on: never more than the joint lead (+ a step) ahead
+        assert node.world.time - (answers[-1] - start) <= 0.15 + 0.1 + 1e-6

@@ -128,8 +128,12 @@ class Lockstep:
         """
         Note an output of `source` answering the simulated instant `stamp` [s].
 
-        `lead` [s simulated], if given, replaces the default lead for this source.
+        `lead` [s simulated], if given, replaces the default lead for this source. A stamp
+        of 0 or less (a node that stamped before its clock got its first /clock) says
+        nothing about where the source is and is ignored.
         """
+        if not stamp > 0.0:
+            return
         newest = self._stamps.get(source)
         self._stamps[source] = stamp if newest is None else max(newest, stamp)
         self._heard[source] = wall_now

@@ -313,6 +313,12 @@ class SimWorldNode(Node):
             'real_time_factor 0) [simulated s per wall s]', 0.01, 1000.0), max_lag)
         self._was_left_behind = False
         self._lockstep_heard = threading.Event()
+        self._lockstep_resend = declare(
+            self, 'lockstep_resend', 0.1,
+            'While the world waits for a lockstep source, send /clock and the last thermal '
+            'frame again this often, for a source that missed them [s wall]', 0.01, 10.0)
+        self._last_thermal_frame = None
+        self.resends = 0
         if lockstep_topic:
             self.create_subscription(
                 ThermalStats, lockstep_topic, self._on_lockstep,
@@ -426,11 +432,16 @@ class SimWorldNode(Node):
 
     def _run(self):
         """Step the world at the real-time factor and publish what is due."""
+        held_since = None
         while not self._stop.is_set():
-            if self._lockstep.hold(self.world.clock.nanoseconds() * 1e-9, time.monotonic()):
+            waiting = self._lockstep.holding(self.world.clock.nanoseconds() * 1e-9,
+                                             time.monotonic())
+            if waiting:
+                held_since = self._resend_while_held(waiting, held_since)
                 self._lockstep_heard.wait(0.01)      # woken by the consumer's next output
                 self._lockstep_heard.clear()
                 continue
+            held_since = None
             delay = self._pace().delay(time.monotonic(), self.world.time)
             if delay > 0.0 and self._stop.wait(delay):
                 break
@@ -447,6 +458,30 @@ class SimWorldNode(Node):
                 self.get_logger().error(f'sim step failed: {error!r}', throttle_duration_sec=5.0)
             self.achieved_real_time_factor = self._pacer.achieved(time.monotonic(),
                                                                   self.world.time)
+
+    def _resend_while_held(self, waiting, held_since):
+        """
+        Send /clock (and the last thermal frame) again while a lockstep source is waited for.
+
+        A held world publishes nothing new, so a source that missed the last /clock (a node
+        whose subscription matched after the first ticks: its clock still reads 0) or the
+        last thermal frame (best effort, dropped by a busy reader) would have nothing to
+        answer, and the world would wait for it forever (or for ``lockstep_timeout`` while
+        its other outputs keep it heard). Every ``lockstep_resend`` of wall time held, the
+        world sends them again, unchanged. Return when the hold began (wall clock).
+        """
+        now = time.monotonic()
+        if held_since is None:
+            return now
+        if now - held_since < self._lockstep_resend:
+            return held_since
+        stamp = self._stamp()
+        self.clock_pub.publish(restamped(self._clock_bytes, stamp))
+        last_thermal = self._last_thermal_frame
+        if 'thermal' in waiting and last_thermal is not None:
+            self._thermal_topics.image.publish(last_thermal)
+        self.resends += 1
+        return now
 
     def _pace(self):
         """Return the pacer in force: the fallback one while a lockstep consumer is silent."""
@@ -507,8 +542,11 @@ class SimWorldNode(Node):
 
     def _send_frame(self, camera, array, stamp):
         """Publish a camera's image `array` (serialised: no message object) and its CameraInfo."""
-        camera.image.publish(serialized_image(array, camera.encoding, stamp, camera.frame_id))
+        image = serialized_image(array, camera.encoding, stamp, camera.frame_id)
+        camera.image.publish(image)
         camera.info.publish(restamped(camera.info_bytes, stamp))
+        if camera is self._thermal_topics:
+            self._last_thermal_frame = image       # sent again while held (lockstep)
 
     def _publish_rgb(self, stamp):
         """
