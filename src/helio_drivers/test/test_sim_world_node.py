@@ -309,5 +309,5 @@ def test_a_held_world_sends_its_clock_again_for_a_source_that_missed_it(tmp_path
                                          QoSProfile(depth=1))
         graph.wait_until(lambda: node.world.time > held_at + 2.0, 60.0,
                          'the world going on in lockstep with the late source')
-        # in lockstep from then on: never more than the joint lead (+ a step) ahead
-        assert node.world.time - (answers[-1] - start) <= 0.15 + 0.1 + 1e-6
+        # in lockstep from then on: never more than the joint lead (0.05 s) and a step ahead
+        assert node.world.time - (answers[-1] - start) <= 0.05 + 0.1 + 1e-6

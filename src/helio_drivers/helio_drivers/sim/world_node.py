@@ -337,10 +337,12 @@ class SimWorldNode(Node):
                 self.create_subscription(
                     Header, topic, lambda message, source=topic: self._on_heartbeat(
                         message, source), QoSProfile(depth=10))
-        # at most one step ahead: a driver's joint states are then never more than two steps
-        # apart in simulated time, within the cameras' 0.3 s joint tolerance
+        # less than a step: the world waits for each driver's report of every step, so a
+        # joint state stamped t is the device as read at simulated time t (with one step of
+        # lead, a moving arm's readings ran up to 0.25 s ahead of their stamps, and images
+        # at the end of a move passed for still)
         self._joint_lead = declare(
-            self, 'lockstep_joint_lead', 0.15,
+            self, 'lockstep_joint_lead', 0.05,
             "How far the world may run ahead of a driver's newest joint_states [s simulated]",
             0.01, 60.0)
         self._rgb_jobs = collections.deque()     # RGB frames developing on the RGB thread
