@@ -43,7 +43,8 @@ every other parameter is read-only after start:
 
 Lockstep (issue 31): a world faster than real time holds its simulated time at most
 ``lockstep_lead`` ahead of the newest stamp on ``lockstep_topic`` (``thermal/stats``: the
-thermal monitor's answer to each thermal image) and, with ``lockstep_joint_states``, at most
+thermal monitor's answer to each thermal image) and on ``lockstep_spot_topic`` (``spot``: the
+spot detector's answer to each RGB image), and, with ``lockstep_joint_states``, at most
 ``lockstep_joint_lead`` ahead of the newest ``joint_states`` of each driver (each
 publisher's set of joint names is a source; the drivers read their device on every /clock
 tick and stamp on the node clock), and at most ``lockstep_lead`` ahead of the newest stamp
@@ -74,7 +75,7 @@ from helio_drivers.sim.clock import Lockstep, Pacer
 from helio_drivers.sim.devices import DeviceSettings, SimDevices
 from helio_drivers.sim.warm_up import warm_up
 from helio_drivers.sim.world import flat_settings, settings_from_flat, SimSettings, SimWorld
-from helio_msgs.msg import LightTruth, ThermalStats
+from helio_msgs.msg import LightTruth, SpotObservation, ThermalStats
 from helio_optics.node_kit.conversions import array_to_point, camera_info_from_camera
 from helio_optics.node_kit.conversions import matrix_to_pose, restamped
 from helio_optics.node_kit.conversions import serialized_image, serialized_pose_stamped
@@ -315,13 +316,23 @@ class SimWorldNode(Node):
         self._lockstep_heard = threading.Event()
         self._lockstep_resend = declare(
             self, 'lockstep_resend', 0.1,
-            'While the world waits for a lockstep source, send /clock and the last thermal '
-            'frame again this often, for a source that missed them [s wall]', 0.01, 10.0)
-        self._last_thermal_frame = None
+            'While the world waits for a lockstep source, send /clock and the last frame of '
+            'the camera it answers again this often, for a source that missed them [s wall]',
+            0.01, 10.0)
+        self._last_frames = {}          # camera frame id -> its last image, serialised
         self.resends = 0
         if lockstep_topic:
             self.create_subscription(
                 ThermalStats, lockstep_topic, self._on_lockstep,
+                QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        spot_topic = declare(
+            self, 'lockstep_spot_topic', 'spot',
+            'helio_msgs/SpotObservation topic answering each RGB image (the spot detector): '
+            "the world runs at most lockstep_lead ahead of its newest stamp too ('' : off)")
+        if spot_topic:
+            self.create_subscription(
+                SpotObservation, spot_topic,
+                lambda message: self._on_answer(message, 'spot'),
                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         if declare(self, 'lockstep_joint_states', True,
                    "Hold the world at most lockstep_joint_lead ahead of each driver's newest "
@@ -418,8 +429,11 @@ class SimWorldNode(Node):
 
     # ------------------------------------------------------------------ loop
     def _on_lockstep(self, message):
-        self._lockstep.seen(stamp_to_seconds(message.header.stamp), time.monotonic(),
-                            'thermal')
+        self._on_answer(message, 'thermal')
+
+    def _on_answer(self, message, source):
+        """Note a consumer's answer to a camera frame (thermal/stats, spot) for the lockstep."""
+        self._lockstep.seen(stamp_to_seconds(message.header.stamp), time.monotonic(), source)
         self._lockstep_heard.set()
 
     def _on_heartbeat(self, message, source):
@@ -463,14 +477,14 @@ class SimWorldNode(Node):
 
     def _resend_while_held(self, waiting, held_since):
         """
-        Send /clock (and the last thermal frame) again while a lockstep source is waited for.
+        Send /clock (and the last camera frame) again while a lockstep source is waited for.
 
         A held world publishes nothing new, so a source that missed the last /clock (a node
         whose subscription matched after the first ticks: its clock still reads 0) or the
-        last thermal frame (best effort, dropped by a busy reader) would have nothing to
-        answer, and the world would wait for it forever (or for ``lockstep_timeout`` while
-        its other outputs keep it heard). Every ``lockstep_resend`` of wall time held, the
-        world sends them again, unchanged. Return when the hold began (wall clock).
+        last frame of its camera (best effort, dropped by a busy reader) would have nothing
+        to answer, and the world would wait for it forever (or for ``lockstep_timeout``
+        while its other outputs keep it heard). Every ``lockstep_resend`` of wall time held,
+        the world sends them again, unchanged. Return when the hold began (wall clock).
         """
         now = time.monotonic()
         if held_since is None:
@@ -479,9 +493,10 @@ class SimWorldNode(Node):
             return held_since
         stamp = self._stamp()
         self.clock_pub.publish(restamped(self._clock_bytes, stamp))
-        last_thermal = self._last_thermal_frame
-        if 'thermal' in waiting and last_thermal is not None:
-            self._thermal_topics.image.publish(last_thermal)
+        for source, camera in (('thermal', self._thermal_topics), ('spot', self._rgb_topics)):
+            frame = self._last_frames.get(camera.frame_id)
+            if source in waiting and frame is not None:
+                camera.image.publish(frame)
         self.resends += 1
         return now
 
@@ -547,8 +562,7 @@ class SimWorldNode(Node):
         image = serialized_image(array, camera.encoding, stamp, camera.frame_id)
         camera.image.publish(image)
         camera.info.publish(restamped(camera.info_bytes, stamp))
-        if camera is self._thermal_topics:
-            self._last_thermal_frame = image       # sent again while held (lockstep)
+        self._last_frames[camera.frame_id] = image     # sent again while held (lockstep)
 
     def _publish_rgb(self, stamp):
         """
