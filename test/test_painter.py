@@ -65,10 +65,9 @@ class Painting:
 @contextlib.contextmanager
 def painting_graph(tmp_path):
     """Run the whole graph in `tmp_path` as a painting session does; yield its Painting."""
-    # free: in lockstep with the drivers' joint states and the thermal monitor (issue 31;
-    # before, at more than 6x the drivers' 20 Hz wall-clock joint states fell 0.3-0.5 s of
-    # simulated time apart and a move could find the wrist's 5 s old)
-    overrides = {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000,
+    # 6x: a painting is CPU-bound on 2 cores, and free (in lockstep with every consumer)
+    # it ran slower in wall time than paced: 351 s for the word test against 287 s at 6x
+    overrides = {'sim_world': {'real_time_factor': 6.0, 'flux_rays': 20000,
                                'canvas_rate': 1.0},
                  'lens_planner': {'calibration_dir': str(tmp_path / 'calibration')}}
     with graph_of_processes(tmp_path, NODES, overrides) as (_, graph):

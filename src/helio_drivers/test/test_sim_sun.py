@@ -161,9 +161,10 @@ def test_lockstep_holds_the_world_at_most_lead_ahead_of_its_consumer_and_not_for
     lockstep.seen(10.0, wall_now=5.0)
     assert not lockstep.hold(10.35, 5.1)           # within the lead
     assert lockstep.hold(10.36, 5.1)               # ahead of it: wait
-    lockstep.seen(9.0, wall_now=5.2)               # a late answer does not move it back
-    assert lockstep.hold(10.36, 5.3)
-    assert not lockstep.left_behind(6.1)
+    lockstep.seen(9.0, wall_now=5.2)               # a late answer does not move it back,
+    lockstep.seen(10.0, wall_now=5.9)              # and neither is an answer to the same
+    assert lockstep.hold(10.36, 5.3)               # frame again progress: silent from 5.0
+    assert not lockstep.left_behind(5.95) and lockstep.left_behind(6.05)
     assert not lockstep.hold(10.36, 6.3)           # silent for more than 1 s wall: go on
     assert lockstep.left_behind(6.3)               # (the node paces itself at real time)
     lockstep.seen(10.3, wall_now=6.4)              # answering again: held again

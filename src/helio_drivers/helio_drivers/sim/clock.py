@@ -109,9 +109,9 @@ class Lockstep:
     ``joint_states``) stamps its outputs with the simulated instant of the input they answer
     or of the node clock they were read on. ``hold`` says to wait while the world is more
     than `lead` simulated seconds ahead of the newest stamp of any source, as a robot's real
-    sensors and devices never run ahead of the software reading them. A source silent for
-    `timeout` wall seconds (stopped, crashed, unplugged) is left behind until it answers
-    again, so it cannot freeze the world; the world node then paces itself at real time
+    sensors and devices never run ahead of the software reading them. A source that has not
+    answered anything newer for `timeout` wall seconds (stopped, crashed, unplugged, or
+    answering the same frame again and again) is left behind until it answers again, so it cannot freeze the world; the world node then paces itself at real time
     (``left_behind``), as the world of a real robot whose perception stopped would go on.
     """
 
@@ -135,8 +135,9 @@ class Lockstep:
         if not stamp > 0.0:
             return
         newest = self._stamps.get(source)
-        self._stamps[source] = stamp if newest is None else max(newest, stamp)
-        self._heard[source] = wall_now
+        if newest is None or stamp > newest:     # progress: an answer to something new
+            self._stamps[source] = stamp
+            self._heard[source] = wall_now
         if lead is not None:
             if not lead > 0.0:
                 raise ValueError(f'lockstep lead must be > 0, got {lead}')

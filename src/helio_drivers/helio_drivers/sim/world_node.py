@@ -493,9 +493,10 @@ class SimWorldNode(Node):
             return held_since
         stamp = self._stamp()
         self.clock_pub.publish(restamped(self._clock_bytes, stamp))
-        for source, camera in (('thermal', self._thermal_topics), ('spot', self._rgb_topics)):
+        for source, camera, name in (('thermal', self._thermal_topics, 'thermal_camera'),
+                                     ('spot', self._rgb_topics, 'rgb_camera')):
             frame = self._last_frames.get(camera.frame_id)
-            if source in waiting and frame is not None:
+            if source in waiting and frame is not None and name not in self._cameras_out:
                 camera.image.publish(frame)
         self.resends += 1
         return now
