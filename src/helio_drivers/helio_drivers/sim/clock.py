@@ -111,7 +111,8 @@ class Lockstep:
     than `lead` simulated seconds ahead of the newest stamp of any source, as a robot's real
     sensors and devices never run ahead of the software reading them. A source that has not
     answered anything newer for `timeout` wall seconds (stopped, crashed, unplugged, or
-    answering the same frame again and again) is left behind until it answers again, so it cannot freeze the world; the world node then paces itself at real time
+    answering the same frame again and again) is left behind until it answers again, so it
+    cannot freeze the world; the world node then paces itself at real time
     (``left_behind``), as the world of a real robot whose perception stopped would go on.
     """
 
