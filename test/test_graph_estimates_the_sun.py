@@ -87,7 +87,7 @@ class GraphClient:
 def estimate_in_graph(tmp_path, namespace=''):
     """Run the graph, sweep the lens, estimate; return (estimate response, true sun)."""
     rig = Rig(load_rig_parameters(default_rig_file()))
-    # free: in lockstep with the drivers and the thermal monitor (issue 31)
+    # free: in lockstep with every consumer of the world (issue 31)
     overrides = {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000}}
     with graph_of_processes(tmp_path, NODES, overrides, namespace) as (_, graph):
         client = GraphClient(graph)

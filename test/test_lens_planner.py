@@ -120,7 +120,7 @@ def planner(tmp_path_factory):
     # joint_state_max_age 10 ms: the drivers publish every simulated step (100 ms), so every
     # goal's present joints are judged by their wall-clock receipt (joint_state_max_wall_age),
     # the lens planner's path for a clock that runs ahead of the joint states. The world runs
-    # free: in lockstep with the drivers and the thermal monitor (issue 31)
+    # free: in lockstep with every consumer of it (issue 31)
     overrides = {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000},
                  'spot_detector': rig, 'sun_estimator': {**rig, **site},
                  'lens_planner': {**rig, **site, 'joint_state_max_age': 0.01,

@@ -277,9 +277,9 @@ def _painting_interrupted(rig, name, y, interrupt, restore=lambda: None):
 
 def test_a_stale_thermal_stream_puts_the_focus_off_the_wood_within_half_a_second(rig):
     # The thermal camera's cable pulled out (the world publishes no thermal frame): the
-    # thermal monitor has nothing to answer. (Not the monitor stopped with SIGSTOP: a process
-    # stopped inside Fast DDS's shared-memory transport can hold its port's lock, and the
-    # drivers' joint states to it then stall too; seen once, as both drivers silent.)
+    # thermal monitor has nothing to answer. (Not the monitor stopped with SIGSTOP: once, both
+    # drivers fell silent from the moment of the SIGSTOP, most likely because a process
+    # stopped inside Fast DDS's shared-memory transport can hold its port's lock.)
     def unplug_thermal():
         rig.set_world(unplugged=['thermal_camera'])
         rig.wait_sim(1.5 * THERMAL_STALE)

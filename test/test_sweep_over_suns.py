@@ -37,7 +37,7 @@ def planner_under(request, tmp_path_factory):
     """Run a graph whose world has one of the suns; yield its Planner."""
     _, latitude, longitude, start, heading = request.param
     tmp_path = tmp_path_factory.mktemp(request.param[0])
-    # free: in lockstep with the drivers and the thermal monitor (issue 31)
+    # free: in lockstep with every consumer of the world (issue 31)
     world = {'real_time_factor': 0.0, 'flux_rays': 20000, 'latitude_deg': latitude,
              'longitude_deg': longitude, 'start_time': start, 'robot_heading_deg': heading}
     site = {'site_file': site_elsewhere_file(tmp_path)}      # the controller: Lausanne

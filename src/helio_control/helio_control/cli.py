@@ -530,7 +530,7 @@ def build_parser(action_type=None):
                        help='record every N-th camera message')
     paint.add_argument('--real-time-factor', type=_finite_float, default=6.0,
                        help='of a started simulated graph (0: as fast as the graph keeps up, '
-                            'in lockstep with the thermal monitor and the drivers)')
+                            'in lockstep with every node that reads it)')
     if action_type is not None:
         add_goal_options(paint, action_type.Goal)
     paint.set_defaults(handler=lambda arguments: command_paint(arguments, action_type))

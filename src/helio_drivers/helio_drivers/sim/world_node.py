@@ -54,9 +54,11 @@ sensors and devices never run ahead of the software reading them, and so the gra
 decisions depend on simulated time whatever the machine's load does to the ratio of the
 clocks: otherwise, on 2 busy cores, the painter's fire-safety watchdog (0.5 s of simulated
 time without thermal data) would trip on a world that merely ran ahead, and images would
-find no joint states within their tolerance. A source silent for ``lockstep_timeout`` of
-wall time (stopped, unplugged) is left behind, so it cannot freeze the world; the world then
-runs at ``lockstep_fallback_factor`` (real time), not as fast as it can.
+find no joint states within their tolerance. A source that answered nothing newer for
+``lockstep_timeout`` of wall time (stopped, unplugged) is left behind, so it cannot freeze the
+world; the world then runs at ``lockstep_fallback_factor`` (real time), not as fast as it
+can. While held, the world sends ``/clock`` and the last frame of the awaited camera again
+every ``lockstep_resend``, for a source that missed them.
 
 Topic names are relative, so the world runs under a namespace with its rig's nodes.
 At shutdown it writes ``canvas.png`` (the burnt panel as a person sees it),
@@ -323,7 +325,8 @@ class SimWorldNode(Node):
         self.resends = 0
         if lockstep_topic:
             self.create_subscription(
-                ThermalStats, lockstep_topic, self._on_lockstep,
+                ThermalStats, lockstep_topic,
+                lambda message: self._lockstep_seen(message.header.stamp, 'thermal'),
                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         spot_topic = declare(
             self, 'lockstep_spot_topic', 'spot',
@@ -332,7 +335,7 @@ class SimWorldNode(Node):
         if spot_topic:
             self.create_subscription(
                 SpotObservation, spot_topic,
-                lambda message: self._on_answer(message, 'spot'),
+                lambda message: self._lockstep_seen(message.header.stamp, 'spot'),
                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         if declare(self, 'lockstep_joint_states', True,
                    "Hold the world at most lockstep_joint_lead ahead of each driver's newest "
@@ -346,8 +349,8 @@ class SimWorldNode(Node):
                 "each one's newest stamp ('' : none)"):
             if topic:
                 self.create_subscription(
-                    Header, topic, lambda message, source=topic: self._on_heartbeat(
-                        message, source), QoSProfile(depth=10))
+                    Header, topic, lambda message, source=topic: self._lockstep_seen(
+                        message.stamp, source), QoSProfile(depth=10))
         # less than a step: the world waits for each driver's report of every step, so a
         # joint state stamped t is the device as read at simulated time t (with one step of
         # lead, a moving arm's readings ran up to 0.25 s ahead of their stamps, and images
@@ -428,23 +431,15 @@ class SimWorldNode(Node):
                 self.get_logger().info(f'{name} plugged back in at {self.world.time:.2f} s')
 
     # ------------------------------------------------------------------ loop
-    def _on_lockstep(self, message):
-        self._on_answer(message, 'thermal')
-
-    def _on_answer(self, message, source):
-        """Note a consumer's answer to a camera frame (thermal/stats, spot) for the lockstep."""
-        self._lockstep.seen(stamp_to_seconds(message.header.stamp), time.monotonic(), source)
-        self._lockstep_heard.set()
-
-    def _on_heartbeat(self, message, source):
-        self._lockstep.seen(stamp_to_seconds(message.stamp), time.monotonic(), source)
+    def _lockstep_seen(self, stamp, source, lead=None):
+        """Note a lockstep source's output stamped `stamp` (a Time message); wake the loop."""
+        self._lockstep.seen(stamp_to_seconds(stamp), time.monotonic(), source, lead)
         self._lockstep_heard.set()
 
     def _on_joint_states(self, message):
-        if message.name:
-            self._lockstep.seen(stamp_to_seconds(message.header.stamp), time.monotonic(),
-                                ','.join(message.name), self._joint_lead)
-            self._lockstep_heard.set()
+        if message.name:          # one source per driver: its set of joint names
+            self._lockstep_seen(message.header.stamp, ','.join(message.name),
+                                self._joint_lead)
 
     def _run(self):
         """Step the world at the real-time factor and publish what is due."""
