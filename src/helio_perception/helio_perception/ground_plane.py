@@ -47,6 +47,11 @@ class MarkerPose:
     edge_width: float = math.nan     # widest outer edge's 10-90 % rise [px] (NaN: unknown)
 
     @property
+    def view_angle(self):
+        """Return the angle [rad] between the marker's normal and its line to the camera."""
+        return marker_view_angle(self.T_world_camera)
+
+    @property
     def blur(self):
         """Return the edge width [px] (the frame's blur as the marker shows it)."""
         return self.edge_width
@@ -191,6 +196,9 @@ class MarkerConfig:
     min_side_pixels: float = 20.0    # smallest plausible marker side in the image [px]
     min_distance: float = 0.03       # camera distance to the marker, plausible range [m]
     max_distance: float = 2.0
+    # farther off the marker's normal, its pose misplaces the ground by up to millimetres
+    # (docs/measurements/2026-11-27-marker-view-angle.md: 0.15 mm at 60 deg, 6 mm at 80 deg)
+    max_view_angle_deg: float = 60.0
     roi_margin: float = 0.5          # ROI around the last corners, as a fraction of their size
     joint_tolerance: float = 1e-4    # joints closer than this count as unchanged [rad]
     max_pose_age: float = 0.0        # re-detect after this long even if still [s] (0: never)
@@ -357,6 +365,7 @@ class MarkerDetector:
         error = float(np.sqrt(np.mean(np.sum((projected - pixels) ** 2, axis=1))))
         distance = float(np.linalg.norm(tvec))
         height = T_world_camera[2, 3]
+        view_angle = math.degrees(marker_view_angle(T_world_camera))
         if error > config.max_reprojection_error:
             reason = f'reprojection error {error:.2f} px > {config.max_reprojection_error} px'
         elif height <= 0:
@@ -364,11 +373,27 @@ class MarkerDetector:
         elif not config.min_distance <= distance <= config.max_distance:
             reason = (f'camera {distance:.3f} m from the marker, outside '
                       f'[{config.min_distance}, {config.max_distance}] m')
+        elif view_angle > config.max_view_angle_deg:
+            reason = (f'marker seen {view_angle:.0f} deg off its normal (> '
+                      f'{config.max_view_angle_deg:g} deg): so slanted a view misplaces the '
+                      'ground by up to millimetres')
         else:
             pose = MarkerPose(T_world_camera=T_world_camera, corners=pixels, stamp=stamp,
                               reprojection_error=error)
             return MarkerResult(pose=pose, detected_now=True)
         return MarkerResult(reason='marker pose implausible: ' + reason)
+
+
+def marker_view_angle(T_world_camera):
+    """
+    Return the angle [rad] between the marker's normal (world z) and its line to the camera.
+
+    The marker's centre is the world origin (Sec. III-A), so the line runs from the origin to
+    the camera's position in the world frame. 0 is square on; near 90 deg the marker is seen
+    edge-on and its pose (Eqs 7-8) no longer fixes the ground plane.
+    """
+    position = np.asarray(T_world_camera, dtype=float)[:3, 3]
+    return math.atan2(math.hypot(position[0], position[1]), position[2])
 
 
 def response_table(response):

@@ -74,6 +74,10 @@ class SpotDetectorNode(Node):
                                  'Closest plausible camera-marker distance [m].', 0.0, 10.0),
             max_distance=declare(self, 'marker.max_distance', 2.0,
                                  'Farthest plausible camera-marker distance [m].', 0.0, 100.0),
+            max_view_angle_deg=declare(self, 'marker.max_view_angle_deg', 60.0,
+                                       'Refuse the marker seen farther off its normal: so '
+                                       'slanted a pose misplaces the ground by up to '
+                                       'millimetres [deg].', 0.0, 90.0),
             roi_margin=declare(self, 'marker.roi_margin', 0.5,
                                'Re-detection ROI around the last corners, as a fraction of '
                                'their extent [-].', 0.0, 10.0),
