@@ -219,3 +219,15 @@ def test_a_joint_state_message_is_read_from_its_header_stamp():
     assert buffer.add_message(message) == ''
     buffer.add(1700000000.5, ARM, [0.0, 0.1, 0.2, 0.0])
     assert buffer.at(1700000000.5, 0.0).positions.tolist() == [0.0, 0.1, 0.2, 0.25, -0.5]
+
+
+def test_reaches_a_stamp_when_every_joint_heard_of_has_a_sample_there_or_later():
+    buffer = JointStateBuffer()
+    assert not buffer.reaches(0.0)                        # nothing heard yet
+    feed_drivers(buffer, [1.0, 1.05], [1.0])              # the wrist lags behind the arm
+    assert buffer.reaches(1.0) and not buffer.reaches(1.02)
+    feed_drivers(buffer, [], [1.05])
+    assert buffer.reaches(1.05) and not buffer.reaches(1.06)
+    only_arm = JointStateBuffer()
+    feed_drivers(only_arm, [2.0], [])                     # a wrist never heard of
+    assert only_arm.reaches(2.0)                          # is not waited for

@@ -202,6 +202,10 @@ class MarkerConfig:
     roi_margin: float = 0.5          # ROI around the last corners, as a fraction of their size
     joint_tolerance: float = 1e-4    # joints closer than this count as unchanged [rad]
     max_pose_age: float = 0.0        # re-detect after this long even if still [s] (0: never)
+    # a marker not found with the joints still is searched for again only this often: a
+    # whole-frame search that fails tries every scale (about 30 ms a frame here) [s] (0: every
+    # frame)
+    miss_retry_period: float = 1.0
     refine_edges: bool = True        # corners from lines fitted to the marker's outer edges
     detect_max_width: int = 640      # wider images are downscaled for detection [px] (0: never)
     roi_side_pixels: int = 120       # ROI re-detection scales the marker to about this [px]
@@ -583,13 +587,18 @@ class MarkerPoseTracker:
     drivers are not synchronised), so a pose only becomes reusable when it was detected
     with the joints already still since the previous frame: the first frame after a move
     is detected again.
+
+    The same holds for a marker out of view: not found with the joints still, it is not
+    searched for again while they stay so, until ``miss_retry_period`` has passed (a shadow
+    or a hand over it may have gone).
     """
 
     detector: MarkerDetector
     last: MarkerPose = None
     previous_joints: np.ndarray = None
+    last_miss: tuple = None           # (joints, stamp, reason) of a marker not found, still
     counts: dict = field(default_factory=lambda: {'cache': 0, 'roi': 0, 'full': 0,
-                                                  'failed': 0})
+                                                  'failed': 0, 'miss_cache': 0})
 
     def update(self, gray, camera, stamp, joints=None):
         """Return a MarkerResult for this image; `joints` the current joint positions."""
@@ -601,6 +610,13 @@ class MarkerPoseTracker:
                 and (config.max_pose_age <= 0 or stamp - self.last.stamp <= config.max_pose_age):
             self.counts['cache'] += 1
             return MarkerResult(pose=self.last, searched='cache')
+        if self.last_miss is not None:
+            missed_joints, missed_at, reason = self.last_miss
+            if self._same(joints, missed_joints) and 0.0 <= stamp - missed_at \
+                    < config.miss_retry_period:
+                self.counts['miss_cache'] += 1
+                return MarkerResult(reason=reason, searched='cache')
+            self.last_miss = None
         result = None
         if self.last is not None:
             roi = self._roi(gray.shape)
@@ -618,6 +634,8 @@ class MarkerPoseTracker:
                 if _touches_border(corners, gray.shape, 0.25 * size):
                     result.reason = (f'marker {config.marker_id} partly visible or out of view '
                                      '(last seen at the image border)')
+            if still and config.miss_retry_period > 0.0:
+                self.last_miss = (joints, stamp, result.reason)
             return result
         self.counts[result.searched] += 1
         # None: not reusable (the joints moved since the last frame, or the frame is blurred)
@@ -635,6 +653,7 @@ class MarkerPoseTracker:
         """Drop the cached pose (e.g. when the camera intrinsics change)."""
         self.last = None
         self.previous_joints = None
+        self.last_miss = None
 
     def _roi(self, shape):
         corners = self.last.corners

@@ -87,6 +87,10 @@ class SpotDetectorNode(Node):
             max_pose_age=declare(self, 'marker.max_pose_age', 0.0,
                                  'Re-detect the marker after this long even when still '
                                  '(0: never) [s].', 0.0, 3600.0),
+            miss_retry_period=declare(self, 'marker.miss_retry_period', 1.0,
+                                      'A marker not found while the joints stay still is '
+                                      'searched for again only this often (0: every frame) '
+                                      '[s].', 0.0, 3600.0),
             refine_edges=declare(self, 'marker.refine_edges', True,
                                  'Take the corners from lines fitted to the outer edges.'),
             detect_max_width=declare(self, 'marker.detect_max_width', 640,
@@ -180,6 +184,14 @@ class SpotDetectorNode(Node):
             'system clock images are never skipped (a replay without its /clock has old '
             'stamps); 0: never [s].', 0.0, 60.0)
         self.sim_time = bool(self.get_parameter('use_sim_time').value)
+        self.joint_wait = declare(
+            self, 'joint_wait', 0.25,
+            'An image waits at most this long (wall time) for joint states stamped at or '
+            'after it, so that its joints are interpolated around it rather than taken from '
+            'a sample before it, when the arm may already have moved (the marker pose cache '
+            'and the kinematic camera pose depend on them). The drivers publish at 20 Hz: a '
+            'wait is usually one joint-state period; 0: never wait [s].', 0.0, 5.0)
+        self._waiting = None          # (image message, wall time it came) waiting for joints
         lens, _ = declare_lens(self)
         self.T_lens_optics = lens.T_lens_optics
         self.rig, _ = declare_rig(self)
@@ -208,6 +220,10 @@ class SpotDetectorNode(Node):
                                  qos_profile_sensor_data)
         self.create_subscription(JointState, 'joint_states', self.on_joint_state,
                                  CAMERA_NODE_JOINT_STATE_DEPTH)
+        if self.joint_wait > 0.0:
+            # wall time: under a held simulated clock the joints it waits for may never come
+            self.create_timer(min(0.05, self.joint_wait), self._flush_waiting,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
         if self.diagnostics_period > 0:
             # wall time: the node clock stops with /clock, and that must be reported too
             self.create_timer(self.diagnostics_period, self.publish_diagnostics,
@@ -221,10 +237,13 @@ class SpotDetectorNode(Node):
         self.world_calibrated = True
 
     def on_joint_state(self, msg):
-        """Merge a (partial) joint state into the buffer."""
+        """Merge a (partial) joint state into the buffer; take a waiting image it completes."""
         problem = self.joints.add_message(msg)
         if problem:
             self.get_logger().warn(problem, throttle_duration_sec=5.0)
+        if self._waiting is not None and self.joints.reaches(
+                stamp_to_seconds(self._waiting[0].header.stamp)):
+            self._take_waiting()
 
     def on_camera_info(self, msg):
         """Keep the intrinsics; a change of intrinsics drops the cached marker pose."""
@@ -245,6 +264,37 @@ class SpotDetectorNode(Node):
         self.observer.reset()
 
     def on_image(self, msg):
+        """
+        Take one image: process it now if the joints reach its stamp, else let it wait.
+
+        The drivers read the joints after the camera's frame is taken, so the joint states
+        at or after an image usually come just after it. An image waits for them (at most
+        ``joint_wait`` of wall time, one image at a time: a newer image takes the older one
+        through first).
+        """
+        if self._waiting is not None:
+            if self._waiting[0].header.stamp == msg.header.stamp:
+                self._waiting = (msg, self._waiting[1])       # the same frame sent again
+                return
+            self._take_waiting()
+        heard = self.joints.newest_stamp() is not None
+        if self.joint_wait > 0.0 and heard and \
+                not self.joints.reaches(stamp_to_seconds(msg.header.stamp)):
+            self._waiting = (msg, time.monotonic())
+            return
+        self.process_image(msg)
+
+    def _take_waiting(self):
+        msg, _ = self._waiting
+        self._waiting = None
+        self.process_image(msg)
+
+    def _flush_waiting(self):
+        """Process an image that waited ``joint_wait`` for joints, with the joints known."""
+        if self._waiting is not None and time.monotonic() - self._waiting[1] >= self.joint_wait:
+            self._take_waiting()
+
+    def process_image(self, msg):
         """Process one image: observe the spot and publish the observation."""
         started = time.perf_counter()
         self.freshness.seen(self.node_seconds(), time.monotonic())

@@ -132,6 +132,68 @@ def test_spot_detector_publishes_observations_and_survives_bad_frames(graph):
     assert node.stats.as_dict()['frames_invalid'] == 1
 
 
+def optics_features(rig, joints, point):
+    """Return Eq 10's (Pi, Theta) of a world point in the optics frame of the lens at joints."""
+    T_optics_world = optics_from_world(rig.forward(joints).T_robot_lens,
+                                       LensParameters().T_lens_optics,
+                                       rig.parameters.T_robot_world)
+    truth = transform_points(T_optics_world, [point[0], point[1], 0.0])
+    return np.hypot(truth[0], truth[1]), np.arctan2(truth[1], truth[0])
+
+
+def test_spot_detector_waits_for_the_joints_after_its_image(graph):
+    """
+    An image newer than every joint state waits for the next ones: the arm moved meanwhile.
+
+    Truth: Eq 10's features of the spot in the optics frame of the lens at the joints
+    published after the image (the moved ones), not at the older joints before it.
+    """
+    scene = SyntheticScene(640, 480)
+    rng = np.random.default_rng(77)
+    T_world_camera, (spot,) = scene.random_view(rng, spot_options={'value': 0.8})
+    frame = scene.render(T_world_camera, [spot], rng=rng)
+    node = graph.add(SpotDetectorNode(**graph.node_options(
+        **{'marker.side': scene.marker_side, 'joint_wait': 5.0})))
+    received = graph.collect(SpotObservation, 'spot')
+    feed = Feeder(graph, 'rgb')
+    feed.infos.publish(camera_info_from_camera(scene.camera, stamp_from_seconds(10.0), 'rgb'))
+    feed.joint_states(10.0)
+    graph.wait_until(lambda: node.camera is not None and node.joints.at(10.0, 0.0),
+                     what='camera_info and both joint-state parts')
+    feed.image(frame.image, 'rgb8', 10.2)          # within the lookup's 0.3 s of 10.0
+    graph.wait_until(lambda: node._waiting is not None, what='the image waiting for joints')
+    assert received.messages == []
+    moved = JOINTS + np.array([0.05, -0.04, 0.03, 0.1, 0.05])
+    feed.joint_states(10.2, moved)                  # the drivers' reading at the image
+    observation = received.wait_for_count(1)[0]
+    assert observation.valid, observation.reason
+    pi, theta = optics_features(node.rig, moved, spot.center)
+    assert observation.pi_feature == pytest.approx(pi, abs=2e-4)
+    assert observation.theta_feature == pytest.approx(theta, abs=5e-3)
+    old_pi, _ = optics_features(node.rig, JOINTS, spot.center)
+    assert abs(old_pi - pi) > 2e-3          # the older joints would have given other features
+
+
+def test_spot_detector_takes_an_image_whose_joints_never_come_after_joint_wait(graph):
+    scene = SyntheticScene(640, 480)
+    rng = np.random.default_rng(78)
+    T_world_camera, (spot,) = scene.random_view(rng, spot_options={'value': 0.8})
+    frame = scene.render(T_world_camera, [spot], rng=rng)
+    node = graph.add(SpotDetectorNode(**graph.node_options(
+        **{'marker.side': scene.marker_side, 'joint_wait': 0.3})))
+    received = graph.collect(SpotObservation, 'spot')
+    feed = Feeder(graph, 'rgb')
+    feed.infos.publish(camera_info_from_camera(scene.camera, stamp_from_seconds(10.0), 'rgb'))
+    feed.joint_states(10.0)
+    graph.wait_until(lambda: node.camera is not None and node.joints.at(10.0, 0.0),
+                     what='camera_info and both joint-state parts')
+    feed.image(frame.image, 'rgb8', 10.2)
+    observation = received.wait_for_count(1)[0]      # the drivers stopped: taken anyway
+    assert observation.valid, observation.reason
+    pi, theta = optics_features(node.rig, JOINTS, spot.center)    # the joints known
+    assert observation.pi_feature == pytest.approx(pi, abs=2e-4)
+
+
 def test_thermal_monitor_publishes_stats_with_the_hottest_ground_point(graph):
     node = graph.add(ThermalMonitorNode(**graph.node_options()))
     received = graph.collect(ThermalStats, 'thermal/stats')

@@ -132,6 +132,17 @@ class JointStateBuffer:
         newest = [s[-1] for s in self._stamps.values() if s]
         return max(newest) if newest else None
 
+    def reaches(self, stamp):
+        """
+        Tell whether every joint heard of has a sample at or after `stamp` [s].
+
+        An image stamped `stamp` then lies between samples of each joint, so its joints are
+        interpolated rather than taken from a sample before it (the arm may have moved since).
+        False while no joint has been heard of at all.
+        """
+        heard = [stamps for stamps in self._stamps.values() if stamps]
+        return bool(heard) and all(stamps[-1] >= float(stamp) for stamps in heard)
+
     def at(self, stamp, tolerance, rest_hold=0.0, rest_epsilon=1e-6, rest_after_newest=True):
         """
         Return the joints at `stamp` [s] (JointLookup).
