@@ -141,6 +141,23 @@ def optics_features(rig, joints, point):
     return np.hypot(truth[0], truth[1]), np.arctan2(truth[1], truth[0])
 
 
+def detector_seeing_one_spot(graph, seed, joint_wait):
+    """Start a spot_detector, give it camera_info and the joints at 10 s; return its inputs."""
+    scene = SyntheticScene(640, 480)
+    rng = np.random.default_rng(seed)
+    T_world_camera, (spot,) = scene.random_view(rng, spot_options={'value': 0.8})
+    frame = scene.render(T_world_camera, [spot], rng=rng)
+    node = graph.add(SpotDetectorNode(**graph.node_options(
+        **{'marker.side': scene.marker_side, 'joint_wait': joint_wait})))
+    received = graph.collect(SpotObservation, 'spot')
+    feed = Feeder(graph, 'rgb')
+    feed.infos.publish(camera_info_from_camera(scene.camera, stamp_from_seconds(10.0), 'rgb'))
+    feed.joint_states(10.0)
+    graph.wait_until(lambda: node.camera is not None and node.joints.at(10.0, 0.0),
+                     what='camera_info and both joint-state parts')
+    return node, received, feed, frame, spot
+
+
 def test_spot_detector_waits_for_the_joints_after_its_image(graph):
     """
     An image newer than every joint state waits for the next ones: the arm moved meanwhile.
@@ -148,18 +165,7 @@ def test_spot_detector_waits_for_the_joints_after_its_image(graph):
     Truth: Eq 10's features of the spot in the optics frame of the lens at the joints
     published after the image (the moved ones), not at the older joints before it.
     """
-    scene = SyntheticScene(640, 480)
-    rng = np.random.default_rng(77)
-    T_world_camera, (spot,) = scene.random_view(rng, spot_options={'value': 0.8})
-    frame = scene.render(T_world_camera, [spot], rng=rng)
-    node = graph.add(SpotDetectorNode(**graph.node_options(
-        **{'marker.side': scene.marker_side, 'joint_wait': 5.0})))
-    received = graph.collect(SpotObservation, 'spot')
-    feed = Feeder(graph, 'rgb')
-    feed.infos.publish(camera_info_from_camera(scene.camera, stamp_from_seconds(10.0), 'rgb'))
-    feed.joint_states(10.0)
-    graph.wait_until(lambda: node.camera is not None and node.joints.at(10.0, 0.0),
-                     what='camera_info and both joint-state parts')
+    node, received, feed, frame, spot = detector_seeing_one_spot(graph, 77, 5.0)
     feed.image(frame.image, 'rgb8', 10.2)          # within the lookup's 0.3 s of 10.0
     graph.wait_until(lambda: node._waiting is not None, what='the image waiting for joints')
     assert received.messages == []
@@ -175,22 +181,11 @@ def test_spot_detector_waits_for_the_joints_after_its_image(graph):
 
 
 def test_spot_detector_takes_an_image_whose_joints_never_come_after_joint_wait(graph):
-    scene = SyntheticScene(640, 480)
-    rng = np.random.default_rng(78)
-    T_world_camera, (spot,) = scene.random_view(rng, spot_options={'value': 0.8})
-    frame = scene.render(T_world_camera, [spot], rng=rng)
-    node = graph.add(SpotDetectorNode(**graph.node_options(
-        **{'marker.side': scene.marker_side, 'joint_wait': 0.3})))
-    received = graph.collect(SpotObservation, 'spot')
-    feed = Feeder(graph, 'rgb')
-    feed.infos.publish(camera_info_from_camera(scene.camera, stamp_from_seconds(10.0), 'rgb'))
-    feed.joint_states(10.0)
-    graph.wait_until(lambda: node.camera is not None and node.joints.at(10.0, 0.0),
-                     what='camera_info and both joint-state parts')
+    node, received, feed, frame, spot = detector_seeing_one_spot(graph, 78, 0.3)
     feed.image(frame.image, 'rgb8', 10.2)
     observation = received.wait_for_count(1)[0]      # the drivers stopped: taken anyway
     assert observation.valid, observation.reason
-    pi, theta = optics_features(node.rig, JOINTS, spot.center)    # the joints known
+    pi, _ = optics_features(node.rig, JOINTS, spot.center)      # the joints known
     assert observation.pi_feature == pytest.approx(pi, abs=2e-4)
 
 
