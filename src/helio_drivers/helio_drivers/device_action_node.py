@@ -62,6 +62,7 @@ from helio_drivers.serial_link import (
 from helio_msgs.msg import DeviceStatus
 from helio_optics.node_kit.parameters import declare
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -192,6 +193,13 @@ class DeviceActionNode(Node):
         self._thread = None
         self.action_server = None
         self.device_services = []
+        # A service callback awaits the device thread's answer. In the node's default
+        # (mutually exclusive) group that await would hold the whole group: the executor
+        # then leaves every other entity of it out of its wait set, /clock, the timers and
+        # the guard condition that brings the answer included, and waits for ever (a
+        # dobot/clear_alarms call in its own process never answered). The services share
+        # a group of their own: one call at a time, the rest of the node unaffected.
+        self.service_group = MutuallyExclusiveCallbackGroup()
 
         self.joint_publisher = self.create_publisher(JointState, 'joint_states', 10)
         self.status_publisher = self.create_publisher(
@@ -277,6 +285,13 @@ class DeviceActionNode(Node):
 
     def advertise_services(self):
         """Create the device's services (called once, when the device is first held)."""
+
+    def create_device_service(self, service_type, name, callback):
+        """Create a service answered on the device thread (`run_call`), in its own group."""
+        service = self.create_service(service_type, name, callback,
+                                      callback_group=self.service_group)
+        self.device_services.append(service)
+        return service
 
     # ---- link -------------------------------------------------------------------------------
 

@@ -129,7 +129,7 @@ class DobotDriverNode(DeviceActionNode):
         """Create dobot/home and dobot/clear_alarms."""
         for name, callback in (('dobot/home', self._home),
                                ('dobot/clear_alarms', self._clear_alarms)):
-            self.device_services.append(self.create_service(Trigger, name, callback))
+            self.create_device_service(Trigger, name, callback)
 
     def read_joints(self):
         """Return the joint names and j1..j4 [rad]."""

@@ -1,0 +1,38 @@
+"""
+The Dobot driver's services, called on the installed node in its own process.
+
+A service callback of the drivers awaits the device thread's answer. In the node's default
+(mutually exclusive) callback group that await held the group, and the executor left every
+other entity of it (the timers, /clock, the guard condition that brings the answer) out of
+its wait set: ``dobot/clear_alarms`` and ``dobot/home`` never answered, and the driver took
+no goal after them (issue 35). The node's own in-process test did not show it: other nodes
+in that process kept waking the executor.
+"""
+
+from conftest import graph_of_processes, wait_for_devices
+from helio_msgs.action import MoveArm
+import pytest
+from std_srvs.srv import Trigger
+
+# wall seconds for an answer (the hang never answers): generous for a loaded 2-core machine
+ANSWER_TIMEOUT = 30.0
+
+
+def test_clear_alarms_answers_every_call_and_the_arm_still_moves_after(tmp_path):
+    with graph_of_processes(tmp_path, ('sim_world', 'dobot_driver'),
+                            {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 2000}}) \
+            as (_, graph):
+        wait_for_devices(graph, 60.0, ('dobot',))
+        clear = graph.helper.create_client(Trigger, 'dobot/clear_alarms')
+        for _ in range(3):
+            response = graph.call(clear, Trigger.Request(), ANSWER_TIMEOUT)
+            assert response.success, response.message
+            assert response.message == 'no alarm was active'
+        arm = graph.action_client(MoveArm, 'move_arm', ANSWER_TIMEOUT)
+        target = [0.1, 0.6, 0.6, 0.0]
+        reply = graph.run_goal(arm, MoveArm.Goal(mode=MoveArm.Goal.MOVJ_ANGLE, target=target),
+                               timeout=120.0)
+        assert reply.result.success, reply.result.message
+        assert list(reply.result.achieved_joints) == pytest.approx(target, abs=1e-3)
+        # and the service still answers after the move
+        assert graph.call(clear, Trigger.Request(), ANSWER_TIMEOUT).success
