@@ -230,6 +230,8 @@ class ServoCalibration:
 
     def pulse_us(self, angle):
         """Pulse width [us] for a joint angle [rad]; ValueError naming the joint if outside."""
+        if not math.isfinite(angle):
+            raise ValueError(f'{self.name} = {angle}: not a finite angle')
         pulse = self.centre_pulse_us + self.direction * self.us_per_rad * (
             angle - self.zero_offset)
         if not self.min_pulse_us - 1e-6 <= pulse <= self.max_pulse_us + 1e-6:

@@ -78,6 +78,16 @@ def test_a_goal_beyond_a_joint_limit_is_refused_naming_the_joint(graph):
     assert emulator.frames_received >= before
     response = graph.move(MoveArm.Goal.MOVL_XYZ, (0.6, 0.0, 0.0, 0.0))
     assert not response.result.success and 'reach' in response.result.message
+    # NaN compares false with both limits: refused by name, the device never commanded
+    for mode, target in ((MoveArm.Goal.MOVJ_ANGLE, (0.0, math.nan, 0.2, 0.0)),
+                         (MoveArm.Goal.MOVJ_XYZ, (0.2, 0.0, math.inf, 0.0)),
+                         (MoveArm.Goal.MOVJ_ANGLE, (0.0, 0.4, 0.2, math.nan))):
+        response = graph.move(mode, target)
+        assert not response.result.success
+        assert 'target refused' in response.result.message
+        assert 'not a finite' in response.result.message
+        assert 'driver error' not in response.result.message
+    assert not emulator.is_moving() and emulator.executed_index == 0
 
 
 def passed_j1(degrees):

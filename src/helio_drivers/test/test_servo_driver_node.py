@@ -112,6 +112,11 @@ def test_out_of_range_angle_is_refused_naming_the_joint(wrist):
     response = graph.run(MoveWrist.Goal(yaw=2.0, pitch=0.0))
     assert not response.result.success and 'lens_yaw' in response.result.message
     assert emulator.pulse_widths_us()[0] == pytest.approx(1500.0)
+    for yaw, pitch in ((math.nan, 0.0), (0.0, math.inf)):
+        response = graph.run(MoveWrist.Goal(yaw=yaw, pitch=pitch))
+        assert not response.result.success
+        assert 'not a finite angle' in response.result.message
+    assert emulator.pulse_widths_us()[:2] == pytest.approx([1500.0, 1500.0])
 
 
 def test_cancel_holds_the_servos_mid_move(wrist, clock):

@@ -93,6 +93,8 @@ class DobotArm:
         """
         p = self.parameters
         x, y, z = (float(v) for v in position)
+        if not all(math.isfinite(v) for v in (x, y, z)):
+            raise ValueError(f'target {[x, y, z]} is not a finite position')
         j1 = math.atan2(y, x)
         reach = math.hypot(x, y) - p.tool_x
         height = z - p.tool_z - p.base_height
@@ -122,6 +124,8 @@ class DobotArm:
 def check_joint_limits(limits, joints):
     """Raise UnreachableError naming the first joint outside its JointLimit, and by how much."""
     for limit, value in zip(limits, joints):
+        if not math.isfinite(value):     # NaN compares false with both limits
+            raise ValueError(f'{limit.name} would be {value}: not a finite angle')
         excess = limit.excess(value)
         if excess > 0.0:
             raise UnreachableError(

@@ -52,3 +52,13 @@ def test_joint_limit_violation_names_the_joint():
         arm.inverse([-0.05, -0.2, 0.05])   # behind the base: j1 beyond -90 deg
     assert error.value.joint == 'j1 (base)'
     assert error.value.excess > 0.0
+
+
+@pytest.mark.parametrize('bad', [math.nan, math.inf, -math.inf])
+def test_non_finite_targets_and_joints_are_refused_with_the_reason(bad):
+    arm = DobotArm()
+    with pytest.raises(ValueError, match='not a finite position'):
+        arm.inverse([0.2, bad, 0.05])
+    # a NaN compares false with both limits: without the check it passed for inside them
+    with pytest.raises(ValueError, match=r'j2 .* not a finite angle'):
+        arm.check_limits([0.0, bad, 0.3])
