@@ -60,6 +60,7 @@ from helio_optics.node_kit.joint_states import JointStateBuffer
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
 from helio_optics.spot import spot_area_at
+from helio_perception.ground_plane import marker_view_angle
 import numpy as np
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.clock import Clock, ClockType
@@ -627,7 +628,7 @@ class LensPlannerNode(Node):
                         continue
                     T_world_rgb = T_world_robot @ self.rig.forward(x).T_robot_rgb
                     if sun_sweep.in_view(camera, T_world_rgb, corners, self.view_margin):
-                        candidates.append((_obliquity(T_world_rgb), x))
+                        candidates.append((marker_view_angle(T_world_rgb), x))
         # The marker's depth is measured worst at a slant (up to 1.5 mm at 15 cm seen 40 deg
         # off its normal, against 0.05 mm square on): keep the squarest views, spread.
         candidates.sort(key=lambda candidate: candidate[0])
@@ -837,12 +838,6 @@ def _model_best_distance(lens, around):
     distances = np.linspace(around - 0.01, around + 0.01, 41)
     areas = [spot_area_at(lens, d) for d in distances]
     return float(distances[int(np.argmin(areas))])
-
-
-def _obliquity(T_world_camera):
-    """Return the angle between the line of sight to the marker (world origin) and its normal."""
-    sight = -T_world_camera[:3, 3] / np.linalg.norm(T_world_camera[:3, 3])
-    return math.acos(min(1.0, max(-1.0, -float(sight[2]))))
 
 
 def _has_marker_pose(message):
