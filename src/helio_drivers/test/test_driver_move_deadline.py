@@ -57,6 +57,16 @@ def test_joint_states_follow_a_fast_sim_clock_and_a_paused_one_alike():
     assert not schedule.due(10.02, 0.04) and schedule.due(10.025, 0.05)
 
 
+def test_a_period_of_one_world_step_is_due_at_every_step_of_an_epoch_clock():
+    # the node clock in epoch seconds (ns * 1e-9, as the driver reads it): ticks one 0.1 s
+    # world step apart come out up to ~0.5 us short of 0.1 s
+    schedule = TwoClockSchedule(0.1)
+    start_ns = 1_782_028_800 * 10**9                   # 2026-06-21, the world's default day
+    ticks = [schedule.due((start_ns + i * 10**8) * 1e-9, 0.002 * (i + 1)) for i in range(100)]
+    assert sum(ticks) == 100
+    assert not schedule.due((start_ns + 99 * 10**8 + 5 * 10**7) * 1e-9, 0.201)   # half a step
+
+
 def test_a_restarted_sim_clock_re_anchors_the_schedule():
     schedule = TwoClockSchedule(0.05)
     assert schedule.due(500.0, 0.0)
