@@ -62,6 +62,21 @@ def pose_result(pose):
                           achieved_joints=[float(v) for v in joints])
 
 
+# The arrays' ranges (a descriptor's range covers scalars only): what the Magician's
+# firmware accepts for j1..j4 is not documented; these bound a typing error, not the arm.
+JOINT_VELOCITY_MAX_DPS = 1000.0
+JOINT_ACCELERATION_MAX_DPS2 = 10000.0
+
+
+def joint_limits_problem(values, highest):
+    """Return what is wrong with four PTP joint limits (each in (0, highest]), or ''."""
+    if len(values) != 4:
+        return f'needs 4 values (j1..j4), got {len(values)}'
+    bad = [f'j{i + 1} {v:g}' for i, v in enumerate(values)
+           if not (math.isfinite(v) and 0.0 < v <= highest)]
+    return f'{", ".join(bad)} outside (0, {highest:g}]' if bad else ''
+
+
 class DobotDriverNode(DeviceActionNode):
     """Serial driver of the Dobot Magician; see the module docstring."""
 
@@ -70,9 +85,11 @@ class DobotDriverNode(DeviceActionNode):
         super().__init__('dobot_driver', SPEC, MoveArm, DobotClient, **kwargs)
         self.joint_params = proto.PtpJointParams(
             tuple(declare(self, 'joint_velocity_dps', [100.0] * 4,
-                          'PTP joint velocities j1..j4 [deg/s].')),
+                          f'PTP joint velocities j1..j4 [deg/s], each in (0, '
+                          f'{JOINT_VELOCITY_MAX_DPS:g}].')),
             tuple(declare(self, 'joint_acceleration_dps2', [100.0] * 4,
-                          'PTP joint accelerations j1..j4 [deg/s^2].')))
+                          f'PTP joint accelerations j1..j4 [deg/s^2], each in (0, '
+                          f'{JOINT_ACCELERATION_MAX_DPS2:g}].')))
         self.coordinate_params = proto.PtpCoordinateParams(
             declare(self, 'xyz_velocity_mmps', 100.0, 'PTP Cartesian velocity [mm/s].',
                     1.0, 1000.0),
@@ -105,8 +122,13 @@ class DobotDriverNode(DeviceActionNode):
             'Names of j1..j4 on /joint_states.'))
         if len(self.joint_names) != 4:
             raise ValueError(f'joint_names needs 4 names, got {self.joint_names}')
-        if len(self.joint_params.velocity) != 4 or len(self.joint_params.acceleration) != 4:
-            raise ValueError('joint_velocity_dps and joint_acceleration_dps2 need 4 values')
+        for name, values, highest in (
+                ('joint_velocity_dps', self.joint_params.velocity, JOINT_VELOCITY_MAX_DPS),
+                ('joint_acceleration_dps2', self.joint_params.acceleration,
+                 JOINT_ACCELERATION_MAX_DPS2)):
+            problem = joint_limits_problem(values, highest)
+            if problem:
+                raise ValueError(f'parameter {name}: {problem}')
         rig, _ = declare_rig(self)      # link lengths and joint limits of this arm
         self.client.arm = DobotArm(rig.parameters.arm)
         self.start_device()

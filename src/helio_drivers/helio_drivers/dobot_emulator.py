@@ -389,6 +389,24 @@ class DobotEmulator(PtyDevice):
         self._alarms.add(int(alarm))
         self.last_refusal = reason
 
+    def _limits_usable(self, index, kind, velocities, accelerations):
+        """
+        Whether the PTP limits of a move can plan it; if not, refuse it with an alarm.
+
+        The settings are stored as written (the protocol's acknowledgement cannot refuse
+        one), so a zero, negative or non-finite velocity or acceleration meets its move
+        here: the move is skipped with PLAN_INV_CALC, as a target it cannot plan, and the
+        device goes on answering (issue 35: it used to kill the emulated arm's thread).
+        """
+        bad = [f'{name} {value:g}' for name, values in (('velocity', velocities),
+                                                        ('acceleration', accelerations))
+               for value in values if not (math.isfinite(value) and value > 0.0)]
+        if bad:
+            self._refuse(proto.Alarm.PLAN_INV_CALC,
+                         f'move {index} refused: {kind} {", ".join(bad)} (PTP parameters '
+                         'must be positive)')
+        return not bad
+
     def _check_joint_limits(self, joints_deg, cartesian):
         for axis, (value, (lower, upper)) in enumerate(zip(joints_deg, self._limits_deg)):
             if lower - 1e-3 <= value <= upper + 1e-3:
@@ -423,6 +441,8 @@ class DobotEmulator(PtyDevice):
                       for v in self._joint_params.velocity]
         accelerations = [min(a * acceleration_ratio, self.hardware.joint_acceleration_dps2)
                          for a in self._joint_params.acceleration]
+        if not self._limits_usable(index, 'joint', velocities, accelerations):
+            return None
         profile = synchronised_profile(distance, velocities, accelerations)
         if profile is None or profile.duration == 0.0:
             self._joints = target_deg.copy()
@@ -447,12 +467,16 @@ class DobotEmulator(PtyDevice):
         a = min(self._coordinate_params.xyz_acceleration * acceleration_ratio,
                 self.hardware.xyz_acceleration_mmps2)
         if length < 1e-9:
-            profile = synchronised_profile(
-                [j4_distance], [self._coordinate_params.r_velocity * velocity_ratio],
-                [self._coordinate_params.r_acceleration * acceleration_ratio])
+            r_limits = ([self._coordinate_params.r_velocity * velocity_ratio],
+                        [self._coordinate_params.r_acceleration * acceleration_ratio])
+            if not self._limits_usable(index, 'rotation', *r_limits):
+                return None
+            profile = synchronised_profile([j4_distance], *r_limits)
             if profile is None:
                 return None
         else:
+            if not self._limits_usable(index, 'Cartesian', [v], [a]):
+                return None
             profile = TrapezoidProfile(v / length, a / length)
         arm = self.arm
 

@@ -158,6 +158,32 @@ def test_joint_limit_raises_an_alarm_naming_the_joint_and_does_not_move(arm):
     assert proto.Alarm.PLAN_INV_CALC in emulator.alarms
 
 
+@pytest.mark.parametrize('velocity, acceleration', [(0.0, 100.0), (-50.0, 100.0),
+                                                    (100.0, 0.0), (math.nan, 100.0)])
+def test_unusable_ptp_limits_refuse_the_move_and_the_device_keeps_answering(
+        arm, velocity, acceleration):
+    # issue 35: a zero velocity used to kill the emulated arm's thread (the arm went silent)
+    emulator, port, clock = arm
+    before = emulator.joint_positions_deg()
+    exchange(port, proto.ptp_joint_params_request(
+        proto.PtpJointParams((velocity,) * 4, (acceleration,) * 4)))
+    index = queue(port, proto.PtpCommand(proto.PtpMode.MOVJ_ANGLE, 20.0, 10.0, 10.0, 0.0))
+    clock.advance(0.001)
+    assert executed(port) == index                  # skipped, as a target it cannot plan
+    assert proto.Alarm.PLAN_INV_CALC in emulator.alarms
+    assert 'must be positive' in emulator.last_refusal
+    assert emulator.joint_positions_deg() == pytest.approx(before)
+    assert exchange(port, proto.get_pose_request()) is not None
+    # set right, the same move runs
+    exchange(port, proto.clear_alarms_request())
+    exchange(port, proto.ptp_joint_params_request(proto.PtpJointParams((100.0,) * 4,
+                                                                       (100.0,) * 4)))
+    index = queue(port, proto.PtpCommand(proto.PtpMode.MOVJ_ANGLE, 20.0, 10.0, 10.0, 0.0))
+    clock.advance(10.0)
+    assert executed(port) == index
+    assert emulator.joint_positions_deg()[0] == pytest.approx(20.0, abs=1e-3)
+
+
 def test_force_stop_halts_mid_move_and_clear_drops_the_rest(arm):
     emulator, port, clock = arm
     first = queue(port, proto.PtpCommand(4, 60.0, 10.0, 10.0, 0.0))
