@@ -4,7 +4,9 @@ Pololu Maestro client over pyserial (compact protocol) with timeouts and bounded
 Set commands have no reply. Queries flush the input first (the compact protocol has no
 framing, so a late reply must never be read as the next one), then wait up to ``timeout``
 for the expected number of bytes, retrying up to ``retries`` more times before raising
-``DeviceTimeoutError``. A failing port raises ``LinkError`` and closes the port.
+``DeviceTimeoutError``; a reply no Maestro can send (a position outside every channel
+range, a moving state other than 0 or 1, an unused error bit) is asked for again (up to
+``IMPOSSIBLE_REPLIES_MAX`` times). A failing port raises ``LinkError`` and closes the port.
 """
 
 import time
@@ -15,12 +17,16 @@ from helio_drivers.serial_link import (
 import serial
 
 
+IMPOSSIBLE_REPLIES_MAX = 5      # replies no Maestro can send, in a row, before a query fails
+
+
 class MaestroClient(SerialClient):
     """A Maestro on a serial port (thread-safe: one exchange at a time)."""
 
     def __init__(self, port, baudrate=115200, timeout=0.1, retries=2):
         """Configure; nothing is opened until connect()."""
         super().__init__(port, baudrate, timeout, retries)
+        self.impossible_replies = 0     # replies no Maestro can send (line noise)
 
     def _exchange(self, data, reply_length, what):
         with self._lock:
@@ -74,15 +80,41 @@ class MaestroClient(SerialClient):
         self._exchange(proto.set_acceleration(channel, units), 0,
                        f'set acceleration ch {channel}')
 
+    def _checked_query(self, data, reply_length, what, decode, possible, describe):
+        """
+        Return a query's decoded reply, asking again while it is one no Maestro can send.
+
+        The compact protocol has no checksum: line noise read as a reply is caught only by
+        its value. Such a reply is dropped, counted in ``impossible_replies`` and asked for
+        again, up to IMPOSSIBLE_REPLIES_MAX times in all (noise is not a lost link: a line
+        that garbles one reply in seven, as issue 35's did, fails a query once in 10^4),
+        then ``DeviceTimeoutError``.
+        """
+        attempts = max(self.retries + 1, IMPOSSIBLE_REPLIES_MAX)
+        for attempt in range(attempts):
+            value = decode(self._exchange(data, reply_length, what))
+            if possible(value):
+                return value
+            self.impossible_replies += 1
+            if attempt < attempts - 1:
+                self.retried += 1
+        raise DeviceTimeoutError(f'{what}: {attempts} impossible replies in a row from '
+                                 f'{self.port} (the last {describe(value)}; line noise?)')
+
     def get_position(self, channel):
-        """Return a channel's current pulse [quarter-us]."""
-        return proto.decode_u16(self._exchange(proto.get_position(channel), 2,
-                                               f'get position ch {channel}'))
+        """Return a channel's current pulse [quarter-us] (0 or within PULSE_RANGE_US)."""
+        return self._checked_query(proto.get_position(channel), 2, f'get position ch {channel}',
+                                   proto.decode_u16, proto.possible_position,
+                                   lambda value: f'{value / 4.0:.2f} us')
 
     def moving(self):
-        """Whether any servo is still moving towards its target."""
-        return self._exchange(proto.get_moving_state(), 1, 'get moving state') != b'\x00'
+        """Whether any servo is still moving towards its target (the reply is 0 or 1)."""
+        return self._checked_query(proto.get_moving_state(), 1, 'get moving state',
+                                   lambda reply: reply[0], lambda value: value in (0, 1),
+                                   lambda value: f'0x{value:02X}') == 1
 
     def get_errors(self):
-        """Return and clear the error bits."""
-        return proto.decode_u16(self._exchange(proto.get_errors(), 2, 'get errors'))
+        """Return and clear the error bits (bits 9-15 are not used by any Maestro)."""
+        return self._checked_query(proto.get_errors(), 2, 'get errors', proto.decode_u16,
+                                   lambda value: value < 1 << len(proto.ERROR_BITS),
+                                   lambda value: f'0x{value:04X}')

@@ -47,6 +47,10 @@ ERROR_BITS = {
 }
 SERIAL_PROTOCOL_ERROR = 1 << 4
 
+# The widest a channel's Min and Max can be set (Maestro Control Center): a Get Position
+# reply is 0 (no pulses) or within this, anything else is line noise read as a reply.
+PULSE_RANGE_US = (64.0, 4080.0)
+
 SPEED_UNIT_US_PER_S = 0.25 / 0.010                  # one Set Speed unit [us/s]
 ACCELERATION_UNIT_US_PER_S2 = 0.25 / 0.010 / 0.080  # one Set Acceleration unit [us/s^2]
 
@@ -111,6 +115,57 @@ def decode_u16(reply):
     if len(reply) != 2:
         raise MaestroProtocolError(f'expected a 2-byte reply, got {len(reply)} bytes')
     return reply[0] | (reply[1] << 8)
+
+
+def possible_position(quarter_us):
+    """Whether a Get Position value can come from a Maestro (0: no pulses)."""
+    return quarter_us == 0 or 4.0 * PULSE_RANGE_US[0] <= quarter_us <= 4.0 * PULSE_RANGE_US[1]
+
+
+class PositionEnvelope:
+    """
+    Where a channel's pulse can be at its next reading, from its last reading and targets.
+
+    A Maestro moves a channel's pulse monotonically from where it is towards its target (at
+    the speed limit, or at once when unlimited), so between two readings the pulse stays
+    within the span of the last reading and every target sent since it. A reading outside
+    that span (beyond `tolerance_qus`) cannot be the device's; until a reading has been
+    accepted and a target sent (after a (re)connection) the span is unknown and every
+    possible value is consistent.
+    """
+
+    def __init__(self, tolerance_qus):
+        """Allow readings `tolerance_qus` [quarter-us] beyond the span."""
+        self.tolerance_qus = tolerance_qus
+        self._span = None               # (low, high) [quarter-us], None: unknown
+        self._target = None             # the last target sent [quarter-us]
+
+    def forget(self):
+        """Know nothing: the device may have moved unseen (a (re)connection)."""
+        self._span = self._target = None
+
+    def known(self):
+        """Whether the span is known."""
+        return self._span is not None
+
+    def targeted(self, target_qus):
+        """Let the pulse travel towards a target just sent."""
+        self._target = target_qus
+        if self._span is not None:
+            self._span = (min(self._span[0], target_qus), max(self._span[1], target_qus))
+
+    def consistent(self, reading_qus):
+        """Whether a reading lies within the span (always, while the span is unknown)."""
+        if self._span is None:
+            return True
+        low, high = self._span
+        return low - self.tolerance_qus <= reading_qus <= high + self.tolerance_qus
+
+    def accepted(self, reading_qus):
+        """Take a reading as the device's: the span restarts from it."""
+        if self._target is None:
+            return                      # no target sent yet: where it goes is unknown
+        self._span = (min(reading_qus, self._target), max(reading_qus, self._target))
 
 
 def encode_u16(value):

@@ -31,6 +31,7 @@ class LinkFaults:
     corrupt_replies: int = 0      # flip bits of the last byte (checksum) of this many replies
     truncate_replies: int = 0     # send only the first half of this many replies
     garbage_replies: int = 0      # put random bytes before this many replies
+    garbage_rate: float = 0.0     # probability that random bytes come before any reply [-]
     reply_delay_s: float = 0.0    # delay every reply by this long [s]
     byte_drop_rate: float = 0.0   # probability that any reply byte is lost [-]
     mute: bool = False            # never answer (input still acted on) until cleared
@@ -195,8 +196,9 @@ class PtyDevice:
         if faults.truncate_replies > 0:
             faults.truncate_replies -= 1
             reply = reply[:len(reply) // 2]
-        if faults.garbage_replies > 0:
-            faults.garbage_replies -= 1
+        if faults.garbage_replies > 0 or (
+                faults.garbage_rate > 0.0 and self._random.random() < faults.garbage_rate):
+            faults.garbage_replies = max(0, faults.garbage_replies - 1)
             reply = bytearray(self._random.randrange(256) for _ in range(7)) + reply
         if faults.byte_drop_rate > 0.0:
             reply = bytearray(b for b in reply if self._random.random() >= faults.byte_drop_rate)

@@ -49,6 +49,9 @@ SPEC = DeviceSpec(device='servo', label='servo controller', action_name='move_wr
                   timeout=0.1, move_timeout=10.0, move_timeout_max=600.0)
 
 FACTORY_RANGE_US = (992.0, 2000.0)      # a new Maestro's channel limits (Min, Max)
+# Two readings of a channel agree when this close [quarter-us]: 10 us, what a servo at the
+# default 1000 us/s covers in the 10 ms between two queries.
+AGREEING_READINGS_QUS = 40
 
 
 def declare_calibration(node, axis, joint_name, channel):
@@ -103,12 +106,60 @@ class ServoDriverNode(DeviceActionNode):
                 'Pulse-width acceleration of an escape move [us/s^2] (0 = unlimited: the '
                 "servo's torque limits it).", 0.0, 80000.0)))
         self.device_limits_qus = {}     # axis -> (low, high) the Maestro was seen to clamp to
+        self.envelopes = {axis: proto.PositionEnvelope(self.tolerance_qus) for axis in AXES}
+        self.readings_dropped = 0       # possible values that no move explains (line noise)
         self._limits_sent = {}          # axis -> (speed, acceleration) units last sent
         self.start_device()
 
     def _positions_qus(self):
-        return {axis: self.client.get_position(c.channel)
-                for axis, (c, _, _) in self.axes.items()}
+        return {axis: self._read_position(axis) for axis in self.axes}
+
+    def _read_position(self, axis):
+        """
+        Return a channel's pulse [quarter-us] that the device really reported (issue 35).
+
+        The compact protocol has no checksum: noise on the line can be read as a reply. The
+        client drops values no Maestro can send; here a possible value is taken when it lies
+        where the pulse can be (``PositionEnvelope``: between the last reading and the
+        targets sent since), or else when a second reading agrees with it (a move nobody
+        here sent, or no span known yet after a connection). A reading that is neither is
+        dropped and counted (``servo/status``); three in a row fail the read.
+        """
+        channel = self.axes[axis][0].channel
+        envelope = self.envelopes[axis]
+        reading = self.client.get_position(channel)
+        if envelope.known() and envelope.consistent(reading):
+            envelope.accepted(reading)
+            return reading
+        for _ in range(2):
+            again = self.client.get_position(channel)
+            if envelope.known() and envelope.consistent(again) or \
+                    abs(again - reading) <= AGREEING_READINGS_QUS:
+                if envelope.known() and not envelope.consistent(reading):
+                    self._reading_dropped(axis, reading)
+                envelope.accepted(again)
+                return again
+            self._reading_dropped(axis, reading)
+            reading = again
+        raise DeviceError(f'{self.axes[axis][0].name}: three position readings that neither '
+                          f'agree nor fit the moves sent (the last {reading / 4.0:.1f} us): '
+                          'noise on the line?')
+
+    def _reading_dropped(self, axis, reading):
+        """Count a dropped reading; say so on servo/status (and in the log, sparingly)."""
+        self.readings_dropped += 1
+        count = self.readings_dropped
+        self.setup_notes['readings'] = (
+            f'{count} position reading{"s" if count > 1 else ""} dropped as not the '
+            f"device's (the last: {self.axes[axis][0].name} {reading / 4.0:.1f} us); "
+            f'{self.client.impossible_replies} impossible replies: noise on the line?')
+        if count & (count - 1) == 0:         # 1, 2, 4, 8, ...
+            self.get_logger().warning(self.setup_notes['readings'])
+
+    def _set_target(self, axis, target_qus):
+        """Send a channel's target, and let its envelope expect the pulse to go there."""
+        self.envelopes[axis].targeted(target_qus)
+        self.client.set_target(self.axes[axis][0].channel, target_qus)
 
     def _angles(self, positions_qus):
         """Return the angle [rad] of each axis whose channel sends pulses (None if not)."""
@@ -135,6 +186,8 @@ class ServoDriverNode(DeviceActionNode):
     def configure_device(self):
         """Hold the servos, set speed and acceleration limits, check the Maestro's state."""
         self.client.get_errors()          # the device answers (and stale errors go)
+        for envelope in self.envelopes.values():
+            envelope.forget()               # the servos may have moved while unconnected
         _, done = self.stop_device()
         self.get_logger().info(f'on connect: {done}')
         self._limits_sent.clear()
@@ -200,7 +253,7 @@ class ServoDriverNode(DeviceActionNode):
         targets, escape = plan
         self._send_limits(escape)
         for axis, target in targets.items():
-            self.client.set_target(self.axes[axis][0].channel, target)
+            self._set_target(axis, target)
         return targets
 
     def poll_move(self, move):
@@ -249,8 +302,8 @@ class ServoDriverNode(DeviceActionNode):
     def stop_device(self):
         """Hold both servos where they are (target = current position), confirmed."""
         positions = self._positions_qus()
-        for axis, (calibration, _, _) in self.axes.items():
-            self.client.set_target(calibration.channel, positions[axis])
+        for axis in self.axes:
+            self._set_target(axis, positions[axis])
         # Set Target has no reply: reading the positions back proves the device has it.
         held = self._positions_qus()
         drift = {a: abs(held[a] - positions[a]) for a in held}

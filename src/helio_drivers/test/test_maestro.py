@@ -93,6 +93,36 @@ def test_emulated_servo_ramps_under_speed_and_acceleration(maestro):
     assert emulator.motion_limits()[:2] == [(2500.0, 3125.0), (math.inf, math.inf)]
 
 
+def test_every_reading_of_a_ramped_move_fits_its_envelope_and_noise_does_not(maestro):
+    # the independent truth: the emulator's ramp (speed and acceleration limited), read
+    # every 20 ms through a move, a reversal mid-move and a hold
+    emulator, port, clock = maestro
+    envelope = proto.PositionEnvelope(tolerance_qus=1)
+    port.write(proto.set_speed(0, 40) + proto.set_acceleration(0, 5))
+    start = proto.decode_u16(query(port, proto.get_position(0), 2))
+    readings = []
+    for target, steps in ((4 * 2200, 40), (4 * 1200, 60), (4 * 1200, 100)):
+        envelope.accepted(start) if not readings else None
+        envelope.targeted(target)
+        port.write(proto.set_target(0, target))
+        for _ in range(steps):
+            clock.advance(0.02)
+            reading = proto.decode_u16(query(port, proto.get_position(0), 2))
+            assert proto.possible_position(reading)
+            assert envelope.consistent(reading), (target, reading)
+            envelope.accepted(reading)
+            readings.append(reading)
+    assert max(readings) > 4 * 1600 and readings[-1] == 4 * 1200      # it moved, then held
+    # held at 1200 us: noise that happens to be a possible value is not where the pulse is
+    assert not envelope.consistent(4 * 1210) and not envelope.consistent(4 * 1000)
+    assert envelope.consistent(4 * 1200)
+    # values no Maestro sends (the 22.7 rad of issue 35's report: 15 950 us)
+    assert not any(proto.possible_position(v) for v in (1, 255, 16321, 4 * 15950, 0xFFFF))
+    assert all(proto.possible_position(v) for v in (0, 256, 4 * 1500, 16320))
+    envelope.forget()
+    assert envelope.consistent(4 * 3000) and not envelope.known()
+
+
 def test_protocol_errors_are_reported_and_cleared(maestro):
     emulator, port, _ = maestro
     port.write(bytes([0x84, 0x00, 0xFF]))

@@ -236,6 +236,33 @@ def test_a_factory_maestro_shows_no_bogus_angle_and_its_limit_fails_fast_then_re
         assert emulator.target_pulse_widths_us() == before
 
 
+def test_noise_on_the_line_never_puts_an_impossible_angle_on_joint_states(wrist):
+    # issue 35: random bytes read as Get Position replies (the compact protocol has no
+    # checksum) put wrist angles up to 22.7 rad on /joint_states (16 of 118 values). Here 7
+    # random bytes come before a fifth of the replies, while the wrist is held and moves
+    emulator, graph = wrist
+    assert graph.run(MoveWrist.Goal(yaw=0.2, pitch=-0.2)).result.success
+    heard = len(graph.joint_states.messages)
+    emulator.inject(garbage_rate=0.2)
+    graph.joint_states.wait_for_count(heard + 60, 20.0)
+    held = graph.joint_states.messages[heard:]
+    moved = graph.run(MoveWrist.Goal(yaw=-0.3, pitch=0.4))
+    emulator.clear_faults()
+    assert moved.result.success, moved.result.message
+    # held: every published angle is the held one (quarter-us resolution ~ 0.0004 rad)
+    for message in held:
+        assert list(message.position) == pytest.approx([0.2, -0.2], abs=1e-3), message
+    # moving: every angle between where the servo was and where it went
+    for message in graph.joint_states.messages[heard + len(held):]:
+        yaw, pitch = message.position
+        assert -0.3 - 1e-3 <= yaw <= 0.2 + 1e-3 and -0.2 - 1e-3 <= pitch <= 0.4 + 1e-3
+    driver = graph.driver
+    print(f'\n{driver.client.impossible_replies} impossible replies and '
+          f'{driver.readings_dropped} possible ones dropped; {len(held)} joint states held')
+    assert driver.client.impossible_replies + driver.readings_dropped > 0
+    assert graph.wait_status(lambda s: s.connected and 'dropped as not the' in s.message)
+
+
 def test_a_device_silent_mid_move_aborts_and_holds_the_servos_when_it_answers(wrist, clock):
     emulator, graph = wrist
     started = threading.Event()
