@@ -22,6 +22,7 @@ import copy
 from dataclasses import dataclass, replace
 import datetime
 import math
+import time
 import traceback
 
 from helio_msgs.msg import SpotObservation, SunEstimate
@@ -94,7 +95,13 @@ class SunEstimatorNode(Node):
                        durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.create_subscription(JointState, 'joint_states', self._on_joint_state, 50)
         self.create_subscription(SpotObservation, 'spot', self._on_spot, 20)
-        self.create_service(EstimateSun, 'estimate_sun', self._on_estimate_sun)
+        # A deep request queue: with the default 10, requests arriving while one estimate ran
+        # were dropped unanswered (issue 35: 39 of 50 simultaneous requests never answered)
+        self.create_service(EstimateSun, 'estimate_sun', self._on_estimate_sun,
+                            qos_profile=QoSProfile(depth=p('request_queue_depth'),
+                                                   reliability=ReliabilityPolicy.RELIABLE))
+        self._last_answer = None         # (key, success, message, estimate) of the last fit
+        self._fits = collections.deque()   # (monotonic end, duration) of recent fits [s]
         period = p('update_period')
         if period > 0.0:
             self.create_timer(period, self._on_timer)
@@ -148,6 +155,14 @@ class SunEstimatorNode(Node):
                 1e-15, 1.0, dynamic=True)
         declare(self, 'max_iterations', 60, 'iteration limit of either solver [-]', 1, 10000,
                 dynamic=True)
+        declare(self, 'request_queue_depth', 100,
+                'estimate_sun requests held while one is answered; more are lost [-]', 1, 10000)
+        declare(self, 'busy_budget', 0.5,
+                'estimate_sun refuses as busy a request that needs a new fit while the fits of '
+                'the last busy_window took more than this fraction of it [-]', 0.05, 1.0,
+                dynamic=True)
+        declare(self, 'busy_window', 10.0, 'wall time over which busy_budget holds [s]',
+                0.1, 3600.0, dynamic=True)
         declare(self, 'update_period', 5.0,
                 'period of the Eq 18 update of sun/estimate (0: off) [s]', 0.0, 3600.0)
         # When an estimate is trusted (sun_estimation.TrustSettings).
@@ -299,19 +314,58 @@ class SunEstimatorNode(Node):
             response.success = False
             response.message = f'trust parameters refused: {error}'
             return response
+        sigma = self._parameter('centre_sigma')
+        options = {'max_iterations': self._parameter('max_iterations')}
+        if method == 'interaction_matrix':
+            options.update(gain=self._parameter('gain'), delta=self._parameter('delta'),
+                           tolerance=self._parameter('tolerance'))
+        # A request that asks what the last one asked (the same observations and settings)
+        # gets its answer without a new fit; one that needs a fit while fits have taken more
+        # than their budget of wall time is refused as busy (issue 35: a flood of requests).
+        key = (method, tuple(b.seconds for b in buffered), repr(trust), sigma,
+               tuple(sorted(options.items())))
+        if self._last_answer is not None and self._last_answer[0] == key:
+            _, response.success, response.message, estimate = self._last_answer
+            response.estimate = copy.deepcopy(estimate)
+            return response
+        busy = self._busy()
+        if busy:
+            response.success = False
+            response.message = busy
+            self.get_logger().warning(busy, throttle_duration_sec=5.0)
+            return response
+        began = time.monotonic()
+        try:
+            self._fit(method, buffered, trust, sigma, options, response)
+        finally:
+            ended = time.monotonic()
+            self._fits.append((ended, ended - began))
+        self._last_answer = (key, response.success, response.message,
+                             copy.deepcopy(response.estimate))
+        return response
+
+    def _busy(self):
+        """Return why a new fit must wait ('busy: ...'), or '' when the budget allows one."""
+        window, budget = self._parameter('busy_window'), self._parameter('busy_budget')
+        now = time.monotonic()
+        while self._fits and self._fits[0][0] < now - window:
+            self._fits.popleft()
+        spent = sum(min(duration, ended - (now - window)) for ended, duration in self._fits)
+        if spent <= budget * window:
+            return ''
+        return (f'busy: estimates took {spent:.1f} s of the last {window:g} s (busy_budget '
+                f'{budget:g}); ask again in a few seconds')
+
+    def _fit(self, method, buffered, trust, sigma, options, response):
+        """Fit the sun to the buffered observations; fill in `response` (Eqs 10-12, 18)."""
         # Eq 18: every observation moved to one reference time, the middle of the sweep.
         seconds = [b.seconds for b in buffered]
         reference = 0.5 * (min(seconds) + max(seconds))
         reference_stamp = stamp_from_seconds(reference)
         anchor = self._sun_at(stamp_to_nanoseconds(reference_stamp))
         corrected = anchor is not None and all(b.sun is not None for b in buffered)
-        sigma = self._parameter('centre_sigma')
         observations = [replace(b.observation, sigma=sigma, angle_offset=angle_offsets(
             anchor, b.sun) if corrected else (0.0, 0.0)) for b in buffered]
-        options = {'max_iterations': self._parameter('max_iterations')}
-        if method == 'interaction_matrix':
-            options.update(gain=self._parameter('gain'), delta=self._parameter('delta'),
-                           tolerance=self._parameter('tolerance'))
         try:
             result = self.estimator.estimate(observations, method=method, trust=trust,
                                              **options)
