@@ -30,7 +30,13 @@ Stopping: every path on which a started job does not succeed (cancel, time limit
 error, device refusal, unexpected error, shutdown) calls ``stop_device`` until it confirms
 the device stands still, for up to ``stop_timeout``; the result says whether the stop was
 confirmed. Every (re)connection stops the device first too (``configure_device``), so a
-move the driver lost track of while the link was down does not go on.
+move the driver lost track of while the link was down does not go on. One exception: a
+device that fell silent (no reply after every retry) is not asked to stop before the goal
+ends, as each try would cost as long again; the link is reset, the goal ends at once saying
+the stop is not confirmed, and the reconnection stops the device as soon as it answers. A
+silent device so ends its goal within (retries + 1) reply timeouts (the Maestro client also
+drains the line for a timeout after each) plus one poll period: 0.6 s with either driver's
+defaults.
 
 Time (issue 31): beside a simulated world the driver is clocked by ``/clock``. The joints are
 read and published every ``1/joint_state_rate`` of the node clock (simulated seconds under
@@ -57,8 +63,8 @@ import time
 
 from helio_drivers.device_support import device_status, MoveDeadline, TwoClockSchedule
 from helio_drivers.serial_link import (
-    AUTO_PORT, DeviceError, find_port, LinkError, parse_usb_id, PortBusyError,
-    ReconnectBackoff)
+    AUTO_PORT, DeviceError, DeviceTimeoutError, find_port, LinkError, parse_usb_id,
+    PortBusyError, ReconnectBackoff)
 from helio_msgs.msg import DeviceStatus
 from helio_optics.node_kit.parameters import declare
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -475,8 +481,23 @@ class DeviceActionNode(Node):
             self._job_failed(run, error)
 
     def _job_failed(self, run, error):
-        """Abort a job on a device error, stopping the device first."""
-        if isinstance(error, LinkError):
+        """
+        Abort a job on a device error, stopping the device first.
+
+        A device that fell silent (no reply after every retry: ``DeviceTimeoutError``) is not
+        asked to stop before the goal ends: each try costs as long as the silence was found
+        in, and the goal's client (the painter) must hear at once that its device does not
+        answer, to take the focus off the wood with what can still move (issue 35: a silent
+        Dobot's goal ended after 3.0 s). The link is reset instead; the next connection stops
+        the device first (``configure_device``), as soon as it answers again.
+        """
+        if isinstance(error, DeviceTimeoutError):
+            self._link_lost(error)
+            label = self.spec.label
+            self._answer(run, 'abort', f'{label} silent, {run.what} aborted: {error}; the '
+                         f'{label} could NOT be stopped (it does not answer): the link is '
+                         'reset and it is stopped as soon as it answers again')
+        elif isinstance(error, LinkError):
             self._link_lost(error)
             self._stop_and_answer(run, 'abort', f'link lost, {run.what} aborted: {error}')
         else:

@@ -13,7 +13,7 @@ import time
 
 from helio_drivers import maestro_protocol as proto
 from helio_drivers.serial_link import (
-    DeviceTimeoutError, LinkError, PORT_FAILURES, SerialClient)
+    DeviceError, DeviceTimeoutError, LinkError, PORT_FAILURES, SerialClient)
 import serial
 
 
@@ -88,7 +88,7 @@ class MaestroClient(SerialClient):
         its value. Such a reply is dropped, counted in ``impossible_replies`` and asked for
         again, up to IMPOSSIBLE_REPLIES_MAX times in all (noise is not a lost link: a line
         that garbles one reply in seven, as issue 35's did, fails a query once in 10^4),
-        then ``DeviceTimeoutError``.
+        then ``DeviceError`` (the device answers: it is not silent).
         """
         attempts = max(self.retries + 1, IMPOSSIBLE_REPLIES_MAX)
         for attempt in range(attempts):
@@ -98,7 +98,7 @@ class MaestroClient(SerialClient):
             self.impossible_replies += 1
             if attempt < attempts - 1:
                 self.retried += 1
-        raise DeviceTimeoutError(f'{what}: {attempts} impossible replies in a row from '
+        raise DeviceError(f'{what}: {attempts} impossible replies in a row from '
                                  f'{self.port} (the last {describe(value)}; line noise?)')
 
     def get_position(self, channel):

@@ -278,8 +278,12 @@ def test_a_device_silent_mid_move_aborts_and_holds_the_servos_when_it_answers(wr
     response = graph.goal_result(handle, 10.0)
     clock.thaw()
     assert not response.result.success
-    assert 'device error' in response.result.message
-    assert 'servos held where they were (confirmed)' in response.result.message
+    assert 'servo controller silent, move aborted' in response.result.message
+    assert 'stopped as soon as it answers again' in response.result.message
+    # the reconnection holds the servos where they are
+    heard = len(graph.statuses.messages)
+    graph.statuses.wait_until(lambda m: any(s.connected for s in m[heard:]), 5.0,
+                              'the servo controller connected again')
     # the target is where the servo was (to the protocol's quarter microsecond), not 1.5 rad
     target_us, position_us = emulator.target_pulse_widths_us()[3], emulator.pulse_widths_us()[3]
     assert 0.1 < PITCH.angle(target_us) < 1.4
