@@ -98,8 +98,8 @@ class MaestroClient(SerialClient):
             self.impossible_replies += 1
             if attempt < attempts - 1:
                 self.retried += 1
-        raise DeviceError(f'{what}: {attempts} impossible replies in a row from '
-                                 f'{self.port} (the last {describe(value)}; line noise?)')
+        raise DeviceError(f'{what}: {attempts} impossible replies in a row from {self.port} '
+                          f'(the last {describe(value)}; line noise?)')
 
     def get_position(self, channel):
         """Return a channel's current pulse [quarter-us] (0 or within PULSE_RANGE_US)."""
