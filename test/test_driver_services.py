@@ -9,7 +9,11 @@ no goal after them (issue 35). The node's own in-process test did not show it: o
 in that process kept waking the executor.
 """
 
+import time
+
 from conftest import graph_of_processes, wait_for_devices
+from helio_drivers import dobot_protocol as proto
+from helio_drivers.dobot_emulator import DobotEmulator
 from helio_msgs.action import MoveArm
 import pytest
 from std_srvs.srv import Trigger
@@ -36,3 +40,34 @@ def test_clear_alarms_answers_every_call_and_the_arm_still_moves_after(tmp_path)
         assert list(reply.result.achieved_joints) == pytest.approx(target, abs=1e-3)
         # and the service still answers after the move
         assert graph.call(clear, Trigger.Request(), ANSWER_TIMEOUT).success
+
+
+def test_after_a_joint_limit_alarm_goals_are_refused_until_clear_alarms_answers_in_a_second(
+        tmp_path):
+    # issue 35's first "done when": the installed driver as its own process, on an emulated
+    # Dobot in this process that raises the alarm as the firmware does (the driver refuses
+    # targets beyond the limits itself, so no goal can provoke one)
+    with DobotEmulator() as emulator, graph_of_processes(
+            tmp_path, ('dobot_driver',), {'dobot_driver': {'port': emulator.port_path}}) \
+            as (_, graph):
+        wait_for_devices(graph, 60.0, ('dobot',))
+        clear = graph.helper.create_client(Trigger, 'dobot/clear_alarms')
+        arm = graph.action_client(MoveArm, 'move_arm', ANSWER_TIMEOUT)
+        emulator.raise_alarm(proto.Alarm.LIMIT_AXIS2_POS)
+        refused = graph.run_goal(arm, MoveArm.Goal(mode=MoveArm.Goal.MOVJ_ANGLE,
+                                                   target=[0.1, 0.5, 0.5, 0.0]), timeout=60.0)
+        assert not refused.result.success
+        assert 'joint limit: j2 beyond its upper limit' in refused.result.message
+        assert 'dobot/clear_alarms' in refused.result.message          # says what to do
+        asked = time.monotonic()
+        response = graph.call(clear, Trigger.Request(), ANSWER_TIMEOUT)
+        took = time.monotonic() - asked
+        print(f'\nclear_alarms answered in {took:.3f} s: {response.message}')
+        assert response.success and 'j2 beyond its upper limit' in response.message
+        assert took <= 1.0
+        assert emulator.alarms == []
+        target = [0.1, 0.5, 0.5, 0.0]
+        moved = graph.run_goal(arm, MoveArm.Goal(mode=MoveArm.Goal.MOVJ_ANGLE, target=target),
+                               timeout=60.0)
+        assert moved.result.success, moved.result.message
+        assert list(moved.result.achieved_joints) == pytest.approx(target, abs=1e-3)
