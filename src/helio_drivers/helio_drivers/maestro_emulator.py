@@ -58,7 +58,7 @@ class MaestroEmulator(PtyDevice):
     def __init__(self, port_path=None, clock=time.monotonic, channel_count=6,
                  calibrations=(), initial_pulse_us=FACTORY_START_US,
                  min_pulse_us=FACTORY_MIN_US, max_pulse_us=FACTORY_MAX_US, seed=0,
-                 line_baudrate=None):
+                 line_baudrate=None, device_number=proto.FACTORY_DEVICE_NUMBER):
         """Create `channel_count` channels at `initial_pulse_us` (0: off), limits [us]."""
         self.clock = clock
         self.calibrations = {c.name: c for c in calibrations}
@@ -68,7 +68,7 @@ class MaestroEmulator(PtyDevice):
                      origin_qus=4.0 * initial_pulse_us, target_qus=4.0 * initial_pulse_us)
             for _ in range(channel_count)]
         self._errors = 0
-        self._parser = proto.CommandParser()
+        self._parser = proto.CommandParser(device_number)     # compact and Pololu protocols
         self.commands_received = 0
         super().__init__(port_path=port_path, seed=seed, name='maestro',
                          line_baudrate=line_baudrate)

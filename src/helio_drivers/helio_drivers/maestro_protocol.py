@@ -14,6 +14,10 @@ Commands (a command byte with bit 7 set, then 7-bit data bytes):
 The compact protocol has no checksum and no reply framing: a client must flush its input
 before every query so a late reply is never taken for the next one.
 
+The Pololu protocol, which public clients use to address one Maestro of several on a
+line, carries the same commands as ``0xAA device command&0x7F data...``: a device acts on
+(and answers) only the commands with its own device number (12 from the factory).
+
 ``ServoCalibration`` maps a joint angle [rad] to a pulse width [us] and back
 (Eq-free, linear): ``pulse = centre + direction * us_per_rad * (angle - zero_offset)``,
 refusing angles whose pulse would leave [min_pulse, max_pulse].
@@ -33,6 +37,8 @@ GO_HOME = 0xA2
 DATA_BYTES = {SET_TARGET: 3, SET_SPEED: 3, SET_ACCELERATION: 3, GET_POSITION: 1,
               GET_MOVING_STATE: 0, GET_ERRORS: 0, GO_HOME: 0}
 REPLY_BYTES = {GET_POSITION: 2, GET_MOVING_STATE: 1, GET_ERRORS: 2}
+POLOLU_START = 0xAA                 # the Pololu protocol's first byte
+FACTORY_DEVICE_NUMBER = 12          # a new Maestro's device number
 
 ERROR_BITS = {
     0: 'serial signal error',
@@ -204,37 +210,56 @@ class Command:
 
 class CommandParser:
     """
-    Incremental parser of the compact protocol (as the Maestro firmware reads it).
+    Incremental parser of the compact and Pololu protocols (as the Maestro firmware reads).
 
     A data byte with bit 7 set where data was expected, or an unknown command byte, is a
-    protocol error: it is counted and parsing restarts at the next command byte.
+    protocol error: it is counted and parsing restarts at the next command byte. A Pololu
+    command (``0xAA device command&0x7F data...``) for another device number is read and
+    dropped (another device on the line acts on it).
     """
 
-    def __init__(self):
-        """Start between commands."""
+    def __init__(self, device_number=FACTORY_DEVICE_NUMBER):
+        """Start between commands; answer Pololu commands addressed to `device_number`."""
+        self.device_number = device_number
         self._pending = []
+        self._addressed = None          # None: compact; else the Pololu device number
+        self._pololu = ''               # '', 'device' or 'command': the next byte expected
         self.protocol_errors = 0
 
     def feed(self, data):
-        """Return the complete commands found in `data`."""
+        """Return the complete commands found in `data` that are for this device."""
         commands = []
         for byte in data:
             if byte & 0x80:
-                if self._pending:
+                if self._pending or self._pololu:
                     self.protocol_errors += 1     # previous command cut short
+                self._pending, self._addressed = [], None
+                self._pololu = 'device' if byte == POLOLU_START else ''
+                if self._pololu:
+                    continue
                 if byte not in DATA_BYTES:
                     self.protocol_errors += 1
-                    self._pending = []
                     continue
                 self._pending = [byte]
+            elif self._pololu == 'device':
+                self._addressed, self._pololu = byte, 'command'
+                continue
+            elif self._pololu == 'command':
+                self._pololu = ''
+                if byte | 0x80 not in DATA_BYTES:
+                    self.protocol_errors += 1
+                    self._addressed = None
+                    continue
+                self._pending = [byte | 0x80]
             elif not self._pending:
                 self.protocol_errors += 1         # stray data byte
                 continue
             else:
                 self._pending.append(byte)
             if len(self._pending) == 1 + DATA_BYTES[self._pending[0]]:
-                commands.append(self._command(self._pending))
-                self._pending = []
+                if self._addressed in (None, self.device_number):
+                    commands.append(self._command(self._pending))
+                self._pending, self._addressed = [], None
         return commands
 
     @staticmethod
@@ -247,8 +272,16 @@ class CommandParser:
         return Command(code, raw[1], raw[2] | (raw[3] << 7))
 
 
+def encode_pololu(command, device_number=FACTORY_DEVICE_NUMBER):
+    """Bytes of a Command in the Pololu protocol, for the Maestro `device_number`."""
+    if not 0 <= device_number < 0x80:
+        raise MaestroProtocolError(f'device number must be 0..127, got {device_number}')
+    compact = encode_command(command)
+    return bytes([POLOLU_START, device_number, compact[0] & 0x7F]) + compact[1:]
+
+
 def encode_command(command):
-    """Bytes of a parsed Command (the inverse of CommandParser)."""
+    """Bytes of a parsed Command in the compact protocol (the inverse of CommandParser)."""
     if command.code not in DATA_BYTES:
         raise MaestroProtocolError(f'unknown command byte 0x{command.code:02X}')
     count = DATA_BYTES[command.code]

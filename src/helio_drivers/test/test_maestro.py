@@ -37,6 +37,44 @@ def test_parser_round_trips_and_flags_protocol_errors():
     assert parser.protocol_errors == 2
 
 
+def test_the_pololu_protocol_carries_the_same_commands_for_its_device_number_only():
+    # issue 35: public clients address a Maestro as 0xAA, device number, command & 0x7F
+    commands = [proto.Command(proto.SET_TARGET, 3, 7000), proto.Command(proto.GET_POSITION, 4),
+                proto.Command(proto.GET_MOVING_STATE), proto.Command(proto.GO_HOME)]
+    # Pololu's documented example: Set Target 1500 us (6000) on channel 2 of device 12
+    assert proto.encode_pololu(proto.Command(proto.SET_TARGET, 2, 6000)) == bytes(
+        [0xAA, 0x0C, 0x04, 0x02, 0x70, 0x2E])
+    data = b''.join(proto.encode_pololu(c) for c in commands)
+    parser = proto.CommandParser()
+    assert sum((parser.feed(bytes([b])) for b in data), []) == commands
+    # another device's commands are read and dropped; compact ones still act
+    other = proto.encode_pololu(proto.Command(proto.SET_TARGET, 0, 8000), device_number=13)
+    compact = proto.encode_command(proto.Command(proto.GET_ERRORS))
+    assert parser.feed(other + compact) == [proto.Command(proto.GET_ERRORS)]
+    # a Pololu command cut short by a compact one, and an unknown command
+    assert parser.feed(bytes([0xAA, 0x0C, 0x04, 0x01, 0x93])) == [proto.Command(0x93)]
+    assert parser.feed(bytes([0xAA, 0x0C, 0x55])) == []
+    assert parser.protocol_errors == 2
+    with pytest.raises(proto.MaestroProtocolError):
+        proto.encode_pololu(commands[0], device_number=128)
+
+
+def test_the_emulator_answers_a_pololu_protocol_client_of_its_device_number(maestro):
+    emulator, port, clock = maestro
+    pololu = proto.encode_pololu
+    port.write(pololu(proto.Command(proto.SET_SPEED, 0, 0))
+               + pololu(proto.Command(proto.SET_TARGET, 0, 4 * 1800)))
+    clock.advance(0.1)
+    reply = query(port, pololu(proto.Command(proto.GET_POSITION, 0)), 2)
+    assert proto.decode_u16(reply) == 4 * 1800
+    assert emulator.pulse_widths_us()[0] == pytest.approx(1800.0)
+    # addressed to device 13: neither acted on nor answered
+    port.write(pololu(proto.Command(proto.SET_TARGET, 0, 4 * 1200), device_number=13))
+    assert query(port, pololu(proto.Command(proto.GET_POSITION, 0), device_number=13), 2) == b''
+    assert emulator.pulse_widths_us()[0] == pytest.approx(1800.0)
+    assert proto.decode_u16(query(port, proto.get_errors(), 2)) == 0
+
+
 def test_calibration_round_trips_and_refuses_out_of_range():
     calibration = proto.ServoCalibration('lens_yaw', 0, min_pulse_us=1000.0,
                                          max_pulse_us=2000.0, direction=-1,
