@@ -18,5 +18,5 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 picture="$1"
 shift
 out="$root/runs/$(date -u +%Y%m%dT%H%M%SZ)"
-python3 -m helio_control paint "$picture" --out "$out" "$@"
+python3 -m helio_control paint "$picture" --out "$out" --sim "$@"
 echo "[helio] the burnt panel: $out/canvas.png; the report: $out/report.html"

@@ -81,8 +81,8 @@ def test_paint_options_are_the_goal_fields_one_to_one():
 
 
 @pytest.mark.parametrize('arguments, status, message', [
-    (['paint', '/nonexistent/picture.png', '--no-start'], 1, 'picture not found'),
-    (['paint', 'sample:nothing', '--no-start'], 1, 'no sample picture'),
+    (['paint', '/nonexistent/picture.png'], 1, 'picture not found'),
+    (['paint', 'sample:nothing'], 1, 'no sample picture'),
     (['paint', 'sample:logo', '--n-p-target', '-3'], 2, 'must be >= 0'),
     (['paint', 'sample:logo', '--canvas-size', 'wide'], 2, 'invalid _finite_float value'),
     (['paint', 'sample:logo', '--no-such-option', '1'], 2, 'unrecognized arguments'),
@@ -100,20 +100,26 @@ def test_bad_input_exits_non_zero_with_one_line(tmp_path, arguments, status, mes
     assert len([line for line in done.stderr.splitlines() if 'error' in line]) == 1
 
 
-def test_paint_with_no_graph_reachable_says_so_in_one_line(tmp_path):
-    done = helio('paint', 'sample:logo', '--no-start', '--connect-timeout', '1', '--out',
-                 str(tmp_path / 'run'), '--namespace', '/nobody_here')
+def test_paint_with_no_graph_reachable_says_so_in_one_line_and_starts_no_simulation(tmp_path):
+    # issue 30: without --sim, helio paint never falls back to the simulated graph (a rig's
+    # graph in another domain or namespace was painted in a simulation instead)
+    done = helio('paint', 'sample:logo', '--connect-timeout', '1', '--out',
+                 str(tmp_path / 'run'), '--namespace', '/nobody_here',
+                 env={**os.environ, 'ROS_DOMAIN_ID': '117'})
     assert done.returncode == 1
-    assert 'no painter answers on /nobody_here/paint within 1 s' in done.stderr
-    assert 'Traceback' not in done.stderr
+    assert ('no painter answers on /nobody_here/paint in ROS_DOMAIN_ID 117 within 1 s'
+            in done.stderr)
+    assert '--sim' in done.stderr and 'Traceback' not in done.stderr
+    assert 'starting the simulated graph' not in done.stderr
+    assert not (tmp_path / 'run' / 'logs').exists()          # no node process was started
 
 
 def test_paint_starts_the_simulated_graph_paints_reports_and_stops_all_of_it(tmp_path):
-    """No graph running: helio paint starts the simulated one, paints two dots, reports."""
+    """No graph running: helio paint --sim starts the simulated one, paints two dots."""
     targets = [(0.06, 0.06), (0.09, 0.07)]
-    done = helio('paint', '--points', *[f'{x},{y}' for x, y in targets], '--start-timeout',
-                 '120', '--out', str(tmp_path / 'run'), '--namespace', '/paint_test',
-                 timeout=600)
+    done = helio('paint', '--sim', '--points', *[f'{x},{y}' for x, y in targets],
+                 '--start-timeout', '120', '--out', str(tmp_path / 'run'), '--namespace',
+                 '/paint_test', timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     assert 'Traceback' not in done.stderr
     assert str(tmp_path / 'run' / 'report.html') in done.stdout + done.stderr
@@ -137,8 +143,8 @@ def test_paint_starts_the_simulated_graph_paints_reports_and_stops_all_of_it(tmp
 def test_ctrl_c_during_paint_stops_the_graph_it_started_and_exits_130(tmp_path, stop):
     run = tmp_path / 'run'
     process = subprocess.Popen(
-        HELIO + ['paint', 'sample:logo', '--connect-timeout', '1', '--start-timeout', '120',
-                 '--out', str(run), '--namespace', '/paint_interrupt'],
+        HELIO + ['paint', 'sample:logo', '--sim', '--connect-timeout', '1', '--start-timeout',
+                 '120', '--out', str(run), '--namespace', '/paint_interrupt'],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     for line in process.stderr:
         if 'starting the simulated graph' in line:

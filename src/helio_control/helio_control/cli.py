@@ -6,7 +6,7 @@ The ``helio`` command: run the graph, paint, record, replay, report.
     helio sim [--real-time-factor X] [--out DIR] [--nodes ...] [--set NODE.PARAM=VALUE]
     helio rig --dobot-port PORT|auto --servo-port PORT [--rgb-camera PKG/EXE] ...
     helio preview PICTURE --out DIR [options]       (no graph needed)
-    helio paint PICTURE [goal options] [--out DIR]
+    helio paint PICTURE [goal options] [--out DIR] [--sim]
     helio record --out DIR [--camera-decimation N] [--sim-time] | --recover BAG
     helio replay BAG [--rate R] [--delay S] [--exclude TOPIC ...]
     helio report RUN_DIR
@@ -362,11 +362,16 @@ class PaintSession:
             client = ActionClient(graph.helper, self.action_type, 'paint')
             try:
                 if not client.wait_for_server(timeout_sec=self.arguments.connect_timeout):
-                    if self.arguments.no_start:
+                    if not self.arguments.sim:
+                        # never the simulator unless asked: a rig's graph in another domain
+                        # or namespace, or slow to start, is not painted in a simulation
+                        domain = os.environ.get('ROS_DOMAIN_ID', '') or '0 (unset)'
                         raise CommandError(
                             f'no painter answers on {graph.helper.resolve_topic_name("paint")}'
-                            f' within {self.arguments.connect_timeout:g} s (start one with '
-                            '"helio sim" or "helio rig", or leave out --no-start)')
+                            f' in ROS_DOMAIN_ID {domain} within '
+                            f'{self.arguments.connect_timeout:g} s: start the graph ("helio '
+                            'rig" or "helio sim"), check ROS_DOMAIN_ID and --namespace, or add '
+                            '--sim to paint in the simulated world')
                     self._start_graph()
                     if hasattr(goal, 'fresh'):
                         goal.fresh = True     # a new simulated panel: nothing is burnt yet
@@ -510,9 +515,10 @@ def build_parser(action_type=None):
     preview.set_defaults(handler=command_preview)
 
     paint = commands.add_parser('paint', help='paint a picture through the paint action',
-                                description='Send the PaintPattern goal to a running graph, '
-                                'or start the simulated graph when none answers; record the '
-                                'run and write its report. Ctrl-C cancels the goal.')
+                                description='Send the PaintPattern goal to a running graph '
+                                '(with --sim: start the simulated graph when none answers); '
+                                'record the run and write its report. Ctrl-C cancels the '
+                                'goal.')
     paint.add_argument('picture', nargs='?', default='',
                        help='picture file or sample:text, sample:logo, sample:portrait')
     paint.add_argument('--out', help='run directory (default: runs/<UTC time>)')
@@ -523,8 +529,9 @@ def build_parser(action_type=None):
                        help='seconds for a started graph to offer the paint action')
     paint.add_argument('--cancel-timeout', type=float, default=60.0,
                        help='seconds to wait for the result after Ctrl-C')
-    paint.add_argument('--no-start', action='store_true',
-                       help='fail instead of starting the simulated graph')
+    paint.add_argument('--sim', action='store_true',
+                       help='when no painter answers, start the simulated graph and paint '
+                            'there (without it: exit 1 naming the domain and namespace)')
     paint.add_argument('--no-record', action='store_true', help='do not record the run')
     paint.add_argument('--camera-decimation', type=_positive_int, default=5,
                        help='record every N-th camera message')
