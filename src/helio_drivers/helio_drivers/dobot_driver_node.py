@@ -46,7 +46,7 @@ MODES = {MoveArm.Goal.MOVJ_XYZ: 'MOVJ_XYZ', MoveArm.Goal.MOVL_XYZ: 'MOVL_XYZ',
          MoveArm.Goal.MOVJ_ANGLE: 'MOVJ_ANGLE'}
 
 # The Magician's USB-serial adapter: Silicon Labs CP210x, on some units a WCH CH340.
-DOBOT_USB_IDS = ('10c4:ea60', '1a86:7523')
+DOBOT_USB_IDS = ('10c4:ea60', '1a86:7523', '1a86:55d4')
 
 SPEC = DeviceSpec(device='dobot', label='dobot', action_name='move_arm', port='auto',
                   usb_ids=DOBOT_USB_IDS, baudrate_max=4000000, timeout=0.2,

@@ -310,7 +310,9 @@ def test_unusable_joint_limits_stop_the_driver_at_start_naming_them(name, values
             pass
 
 
-def test_port_auto_finds_the_arm_by_the_usb_id_of_its_adapter(monkeypatch):
+@pytest.mark.parametrize('vid, pid', [(0x10C4, 0xEA60), (0x1A86, 0x55D4)],
+                         ids=['cp210x', 'ch9102'])
+def test_port_auto_finds_the_arm_by_the_usb_id_of_its_adapter(monkeypatch, vid, pid):
     from serial.tools import list_ports, list_ports_common
     emulator = DobotEmulator()
 
@@ -318,8 +320,9 @@ def test_port_auto_finds_the_arm_by_the_usb_id_of_its_adapter(monkeypatch):
         info = list_ports_common.ListPortInfo(device, skip_link_detection=True)
         info.vid, info.pid, info.serial_number = vid, pid, serial_number
         return info
-    # the emulator's pty, presented as the Magician's CP210x; beside it a Maestro
-    ports = [adapter(emulator.port_path, 0x10C4, 0xEA60, '0001'),
+    # the emulator's pty, presented as the Magician's CP210x (or the newer units' CH9102, a
+    # CH343-family bridge: issue 30); beside it a Maestro
+    ports = [adapter(emulator.port_path, vid, pid, '0001'),
              adapter('/dev/helio-no-such-maestro', 0x1FFB, 0x0089, 'M')]
     monkeypatch.setattr(list_ports, 'comports', lambda *args, **kwargs: ports)
     with driver_on(emulator, lambda e: Graph(e, port='auto')) as (emulator, graph):
