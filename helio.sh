@@ -25,5 +25,9 @@ case "$job" in
     demo) exec bash "$root/scripts/demo.sh" "$@";;
     test) exec bash "$root/scripts/test.sh" "$@";;
     setup) ;;
-    shell) exec bash --rcfile <(echo "PS1='(helio) \\w\\$ '") -i;;
+    shell)
+        # `helio` on the PATH (colcon installs it for `ros2 run helio_control helio`)
+        mkdir -p "$root/install/bin"
+        ln -sf "$root/install/helio_control/lib/helio_control/helio" "$root/install/bin/helio"
+        PATH="$root/install/bin:$PATH" exec bash --rcfile <(echo "PS1='(helio) \\w\\$ '") -i;;
 esac
