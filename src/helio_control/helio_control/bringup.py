@@ -134,9 +134,12 @@ def simulated_graph(port_dir, nodes=None, overrides=None):
     dobot_port = os.path.join(port_dir, 'dobot')
     servo_port = os.path.join(port_dir, 'servo')
     link = {'timeout': SIMULATED_DEVICE_REPLY_TIMEOUT, 'reconnect_max': SIMULATED_RECONNECT_MAX}
+    # the simulated rig's calibrations stay with its graph: never in the real rig's directory
+    # (~/.helio/calibration), which the lens planner reads back at start (issue 30)
     wiring = {'sim_world': {'dobot_port': dobot_port, 'servo_port': servo_port},
               'dobot_driver': {'port': dobot_port, **link},
-              'servo_driver': {'port': servo_port, **link}}
+              'servo_driver': {'port': servo_port, **link},
+              'lens_planner': {'calibration_dir': os.path.join(port_dir, 'calibration')}}
     return _select(SIMULATED_NODES, 'simulated', wiring, nodes, overrides)
 
 

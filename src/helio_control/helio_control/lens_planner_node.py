@@ -40,6 +40,8 @@ import traceback
 from action_msgs.msg import GoalStatus
 from geometry_msgs.msg import PoseStamped
 from helio_control import lens_moves, sun_sweep
+from helio_control.calibration_store import CalibrationRefused, load_calibration
+from helio_control.calibration_store import rig_description, save_calibration
 from helio_control.focus_lease import FocusLease
 from helio_control.world_calibration import estimate_world_in_robot
 from helio_msgs.action import (CalibrateFocus, CalibrateWorld, FocusLens, MoveArm, MoveWrist,
@@ -69,7 +71,6 @@ from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import Header
-import yaml
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -208,6 +209,11 @@ class LensPlannerNode(Node):
                                   'Where calibrations are saved (empty: ~/.helio/'
                                   'calibration).')
         self.calibration_dir = os.path.expanduser(calibration_dir or '~/.helio/calibration')
+        self.rig_description = rig_description(rig_file)
+        load_calibrations = declare(
+            self, 'load_calibrations', True,
+            'At start, read back the robot-world and focal calibrations saved in '
+            'calibration_dir for this rig description, publish and use them.')
 
         self.targeting = FocusTargeting(self.rig, self.lens, rays=self.focus_rays)
         self.world_calibrated = False      # T_robot_world measured: no marker needed
@@ -254,6 +260,8 @@ class LensPlannerNode(Node):
             ActionServer(self, action_type, name, self._guarded(action_type, execute),
                          goal_callback=lambda goal: GoalResponse.ACCEPT,
                          cancel_callback=self._on_cancel)
+        if load_calibrations:
+            self._load_calibrations()
         self.get_logger().info(f'lens_planner: rig from {rig_file}, lens from {lens_file}; '
                                f'heating {self.heating_distance * 100:.1f} cm, travel '
                                f'{self.travel_distance * 100:.1f} cm')
@@ -262,6 +270,56 @@ class LensPlannerNode(Node):
 
     def _calibrated(self, _rig):
         self.world_calibrated = True
+
+    def _load_calibrations(self):
+        """Read back, publish and use the calibrations saved for this rig (issue 30)."""
+        for name, use in (('robot_world.yaml', self._use_saved_world),
+                          ('focus.yaml', self._use_saved_focus)):
+            try:
+                saved = load_calibration(self.calibration_dir, name, self.rig_description)
+            except CalibrationRefused as error:
+                self.get_logger().warning(f'calibration not used: {error}')
+                continue
+            if saved is None:
+                continue
+            values, record = saved
+            try:
+                what = use(values)
+            except (KeyError, TypeError, ValueError) as error:
+                self.get_logger().warning(f'calibration not used: {name}: {error!r}')
+                continue
+            self.get_logger().info(f'calibration read back from {self.calibration_dir}/{name} '
+                                   f'(saved {record.get("saved_at")}): {what}')
+
+    def _use_saved_world(self, values):
+        rig = values['rig']
+        self._publish_world(rig['world_in_robot'], rig['world_yaw'])
+        return (f'marker at {np.round(np.asarray(rig["world_in_robot"]) * 1000, 2).tolist()} '
+                f'mm, yaw {math.degrees(rig["world_yaw"]):.3f} deg')
+
+    def _use_saved_focus(self, values):
+        distance = float(values['heating_distance'])
+        if not (math.isfinite(distance) and distance > 0.0):
+            raise ValueError(f'heating_distance {distance} m')
+        self._apply_focus(distance)
+        message = FocalCalibration(heating_distance=distance,
+                                   min_area=float(values.get('min_area', math.nan)),
+                                   fit_rms_relative=float(values.get('fit_rms_relative',
+                                                                     math.nan)),
+                                   samples=int(values.get('samples', 0)))
+        message.header.stamp = self.get_clock().now().to_msg()
+        self.focus_publisher.publish(message)
+        return f'heating distance {distance * 100:.2f} cm'
+
+    def _publish_world(self, world_in_robot, world_yaw):
+        """Use T_robot_world and publish it on calibration/world_pose (latched)."""
+        self.rig.set_world(world_in_robot, world_yaw)
+        self.world_calibrated = True
+        message = PoseStamped()
+        message.header.stamp = self.get_clock().now().to_msg()
+        message.header.frame_id = 'robot'
+        message.pose = matrix_to_pose(self.rig.parameters.T_robot_world)
+        self.world_publisher.publish(message)
 
     def _on_joint_state(self, message):
         problem = self.joints.add_message(message, received=time.monotonic())
@@ -586,16 +644,13 @@ class LensPlannerNode(Node):
         result.turn_from_rig_file = float(math.remainder(estimate.world_yaw - before.world_yaw,
                                                          2.0 * math.pi))
         if goal_handle.request.apply:
-            self.rig.set_world(estimate.world_in_robot, estimate.world_yaw)
-            self.world_calibrated = True
-            message = PoseStamped()
-            message.header.stamp = self.get_clock().now().to_msg()
-            message.header.frame_id = 'robot'
-            message.pose = result.world_in_robot
-            self.world_publisher.publish(message)
+            self._publish_world(estimate.world_in_robot, estimate.world_yaw)
             result.saved_to = self._save('robot_world.yaml', {'rig': {
                 'world_in_robot': [float(v) for v in estimate.world_in_robot],
-                'world_yaw': float(estimate.world_yaw)}})
+                'world_yaw': float(estimate.world_yaw)}}, {
+                'residual_position_m': float(estimate.residual_position),
+                'residual_angle_rad': float(estimate.residual_angle),
+                'poses_used': int(estimate.used)})
         result.message = (
             f'T_robot_world from {estimate.used} poses ({len(estimate.rejected)} left out): '
             f'marker at {np.round(estimate.world_in_robot * 1000, 2).tolist()} mm, yaw '
@@ -635,14 +690,9 @@ class LensPlannerNode(Node):
         squarest = [x for _, x in candidates[:3 * count]]
         return sun_sweep._spread(squarest)[:count]
 
-    def _save(self, name, tree):
-        os.makedirs(self.calibration_dir, exist_ok=True)
-        path = os.path.join(self.calibration_dir, name)
-        with open(path, 'w') as stream:
-            stream.write(f'# written by lens_planner at node time {self._now():.3f} s\n')
-            yaml.safe_dump({'/**': {'ros__parameters': tree}}, stream,
-                           default_flow_style=False)
-        return path
+    def _save(self, name, tree, notes=None):
+        return save_calibration(self.calibration_dir, name, tree, self.rig_description,
+                                'lens_planner', notes)
 
     # ---- sun sweep -------------------------------------------------------------------------
 
@@ -778,7 +828,7 @@ class LensPlannerNode(Node):
         result.min_area = fit.min_area
         result.fit_rms_relative = fit.fit.rms_relative
         if request.apply:
-            self._apply_focus(fit)
+            self._apply_focus(fit.best_d_lp)
             message = FocalCalibration(heating_distance=fit.best_d_lp, min_area=fit.min_area,
                                        fit_rms_relative=fit.fit.rms_relative,
                                        samples=int(np.count_nonzero(measured)))
@@ -786,7 +836,9 @@ class LensPlannerNode(Node):
             self.focus_publisher.publish(message)
             result.saved_to = self._save('focus.yaml', {
                 'heating_distance': float(fit.best_d_lp),
-                'lens': {'focal_length': float(self.lens.focal_length)}})
+                'min_area': float(fit.min_area),
+                'fit_rms_relative': float(fit.fit.rms_relative),
+                'samples': int(message.samples)})
         result.message = (f'smallest spot at d_lp {fit.best_d_lp * 100:.2f} cm (fit), '
                           f'{fit.sample_best_d_lp * 100:.1f} cm (samples), '
                           f'{fit.min_area * 1e6:.2f} mm^2; fit rms '
@@ -823,14 +875,14 @@ class LensPlannerNode(Node):
                              'sweep for this sun; give the goal a target')
         return best
 
-    def _apply_focus(self, fit):
-        """Use the found heating distance; scale the lens model's focus to match it."""
+    def _apply_focus(self, heating_distance):
+        """Use a measured heating distance; scale the lens model's focus to match it."""
         model_best = _model_best_distance(self.lens, self.heating_distance)
-        scale = fit.best_d_lp / model_best if model_best > 0 else 1.0
+        scale = heating_distance / model_best if model_best > 0 else 1.0
         self.lens = type(self.lens)(**{**self.lens.__dict__,
                                        'focal_length': self.lens.focal_length * scale})
         self.targeting = FocusTargeting(self.rig, self.lens, rays=self.focus_rays)
-        self.heating_distance = fit.best_d_lp
+        self.heating_distance = heating_distance
 
 
 def _model_best_distance(lens, around):

@@ -1,0 +1,70 @@
+"""
+Calibrations saved to, and read back from, one calibration directory (issue 30, item 4).
+
+A calibration file is a ROS parameters file (``/**: ros__parameters: {...}``, so it can also
+be passed with ``--params-file``) whose parameters hold the values, plus a
+``calibration_record`` entry: when it was made, by what, and the rig description it was made
+for (``rig_description``: a digest of the rig file's text). A calibration made for another rig
+description (a changed link length, another camera mount) measured a different rig: it is
+refused on load with the reason, never applied.
+"""
+
+import datetime
+import hashlib
+import os
+
+import yaml
+
+RECORD = 'calibration_record'
+
+
+class CalibrationRefused(ValueError):
+    """A saved calibration that must not be used here; the message says why."""
+
+
+def rig_description(rig_file):
+    """Return the digest (16 hex digits) of the rig file a calibration is made for."""
+    with open(rig_file, 'rb') as stream:
+        return hashlib.sha256(stream.read()).hexdigest()[:16]
+
+
+def save_calibration(directory, name, values, description, made_by, notes=None):
+    """Write `values` (a parameter tree) as `directory`/`name`; return the path."""
+    os.makedirs(directory, exist_ok=True)
+    record = {'made_by': made_by, 'rig_description': description,
+              'saved_at': datetime.datetime.now(datetime.timezone.utc).isoformat(
+                  timespec='seconds')}
+    record.update(notes or {})
+    path = os.path.join(directory, name)
+    with open(path, 'w') as stream:
+        stream.write(f'# {name}: written by {made_by}; read back at start when made for '
+                     'this rig description\n')
+        yaml.safe_dump({'/**': {'ros__parameters': {**values, RECORD: record}}}, stream,
+                       default_flow_style=False)
+    return path
+
+
+def load_calibration(directory, name, description):
+    """
+    Return (values, record) saved as `directory`/`name`, or None when there is no such file.
+
+    Raises CalibrationRefused naming the file and the reason when it cannot be read or was
+    made for another rig description.
+    """
+    path = os.path.join(directory, name)
+    if not os.path.exists(path):
+        return None
+    try:
+        with open(path) as stream:
+            tree = yaml.safe_load(stream)
+        values = dict(tree['/**']['ros__parameters'])
+        record = values.pop(RECORD)
+        made_for = record['rig_description']
+    except (OSError, yaml.YAMLError, KeyError, TypeError) as error:
+        raise CalibrationRefused(f'{path}: not a calibration file ({error!r})') from None
+    if made_for != description:
+        raise CalibrationRefused(
+            f'{path} was made for rig description {made_for} (saved '
+            f'{record.get("saved_at", "at an unknown time")}), this rig is {description}: the '
+            'rig file changed since; calibrate again')
+    return values, record

@@ -1,0 +1,35 @@
+"""Calibration files: round trip, the rig description they were made for, bad files."""
+
+from helio_control.calibration_store import (
+    CalibrationRefused, load_calibration, rig_description, save_calibration)
+import pytest
+import yaml
+
+
+def test_a_calibration_reads_back_for_its_rig_and_is_refused_for_another(tmp_path):
+    rig = tmp_path / 'rig.yaml'
+    rig.write_text('rig:\n  link_2: 0.135\n')
+    made_for = rig_description(str(rig))
+    values = {'rig': {'world_in_robot': [0.145, -0.1, -0.14], 'world_yaw': 0.01}}
+    path = save_calibration(str(tmp_path / 'cal'), 'robot_world.yaml', values, made_for,
+                            'lens_planner', {'residual_position_m': 2e-5})
+    # a ROS parameters file: the values under /**, the record beside them
+    with open(path) as stream:
+        tree = yaml.safe_load(stream)['/**']['ros__parameters']
+    assert tree['rig'] == values['rig']
+    assert tree['calibration_record']['rig_description'] == made_for
+    back, record = load_calibration(str(tmp_path / 'cal'), 'robot_world.yaml', made_for)
+    assert back == values and record['made_by'] == 'lens_planner'
+    assert record['residual_position_m'] == 2e-5 and record['saved_at'].endswith('+00:00')
+    # one character more in the rig file: another rig description, refused with the reason
+    rig.write_text('rig:\n  link_2: 0.1351\n')
+    with pytest.raises(CalibrationRefused, match='was made for rig description .*calibrate'):
+        load_calibration(str(tmp_path / 'cal'), 'robot_world.yaml', rig_description(str(rig)))
+    assert load_calibration(str(tmp_path / 'cal'), 'focus.yaml', made_for) is None
+
+
+@pytest.mark.parametrize('text', ['', 'just text', '/**:\n  ros__parameters:\n    a: 1\n'])
+def test_a_file_that_is_not_a_calibration_is_refused_by_name(tmp_path, text):
+    (tmp_path / 'focus.yaml').write_text(text)
+    with pytest.raises(CalibrationRefused, match='focus.yaml: not a calibration file'):
+        load_calibration(str(tmp_path), 'focus.yaml', '0123456789abcdef')
