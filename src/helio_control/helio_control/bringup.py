@@ -221,9 +221,17 @@ def node_processes(specs, namespace='', log_dir=None, env=None):
             for entry in node_entries(specs, namespace)]
 
 
+# Stopped first, one after the other, while the rest of the graph runs (issue 30): the
+# painter ends a painting as a cancel does (the lens retreated through the lens planner),
+# then the lens planner retreats a lens still at the heating distance (a painter that was
+# killed); the drivers and the world stop after them.
+SAFE_STOP_ORDER = ('painter', 'lens_planner')
+
+
 def start_graph(specs, namespace='', log_dir=None, env=None, on_death=None):
     """Start the described nodes as processes; return the running ProcessGroup."""
-    return ProcessGroup(node_processes(specs, namespace, log_dir, env), on_death).start()
+    return ProcessGroup(node_processes(specs, namespace, log_dir, env), on_death,
+                        stop_first=SAFE_STOP_ORDER).start()
 
 
 @contextlib.contextmanager

@@ -223,6 +223,11 @@ class LensPlannerNode(Node):
         self.camera = None
         self._camera_seen = FirstOf()        # done at the first rgb/camera_info
         self._busy = False
+        self._at_heating = False             # a focus left the lens at the heating distance
+        self.interrupt_timeout = declare(
+            self, 'interrupt_timeout', 5.0,
+            'On Ctrl-C or SIGTERM, how long a retreat of a lens left at the heating distance '
+            'may take before the node stops [s wall].', 0.0, 60.0)
         self._driver_goals = []              # handles of the driver goals in flight
         self._spot_waiters = []
         self.create_subscription(JointState, 'joint_states', self._on_joint_state, 50)
@@ -342,6 +347,24 @@ class LensPlannerNode(Node):
             f'node clock, {wall_silence:.2f} s wall): retreating the lens')
         self.executor.create_task(self._lease_retreat())
 
+    async def on_interrupt(self):
+        """
+        Ctrl-C or SIGTERM of this node: a lens left at the heating distance is retreated first.
+
+        ``run_node`` runs this before the node goes (issue 30). A goal in progress (the
+        painter's own retreat, signalled before this node) is let end first; then, if a focus
+        left the lens at the heating distance, the lens is moved to the travel distance as
+        when a client's lease expires. At most ``interrupt_timeout`` [s wall] in all.
+        """
+        while self._busy:
+            await sleep(self, 0.02, wall=True)
+        if not self._at_heating:
+            return
+        self.lease.disarm()
+        self._busy = True
+        self.get_logger().warning('stopping with the lens at the heating distance: retreating')
+        await self._lease_retreat()
+
     async def _lease_retreat(self):
         """Move the lens along the sun ray to the travel distance over where it focuses."""
         try:
@@ -353,7 +376,8 @@ class LensPlannerNode(Node):
             legs, _ = self._plan_focus(here, self.travel_distance)
             for leg in legs:
                 await self._move(UNATTENDED, leg.x)
-            self.get_logger().warning('lens retreated: the lease of its client expired')
+            self._at_heating = False
+            self.get_logger().warning('lens retreated to the travel distance')
         except (GoalFailed, GoalCanceled) as error:
             self.get_logger().error(f'the lens could not be retreated: {error}')
         finally:
@@ -396,6 +420,7 @@ class LensPlannerNode(Node):
             self._busy = True
             if action_type is not FocusLens:
                 self.lease.disarm()       # its own procedure: no client's focus to guard
+                self._at_heating = False
             try:
                 await execute(goal_handle, result)
                 result.success = True
@@ -551,8 +576,9 @@ class LensPlannerNode(Node):
                 - self.rig.forward(reached).T_robot_lens[:3, 3]))
             goal_handle.publish_feedback(feedback)
             reached = await self._move(goal_handle, leg.x)
-        self.lease.placed(not lens_moves.safe_to_travel_at(d_lp, self.heating_distance,
-                                                           self.safe_margin), alive)
+        self._at_heating = not lens_moves.safe_to_travel_at(d_lp, self.heating_distance,
+                                                            self.safe_margin)
+        self.lease.placed(self._at_heating, alive)
         commanded = self.rig.forward(legs[-1].x).T_robot_lens[:3, 3]
         achieved = self.rig.forward(reached).T_robot_lens[:3, 3]
         result.achieved = self._lens_pose(reached, d_lp)

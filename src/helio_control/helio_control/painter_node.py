@@ -61,7 +61,7 @@ from helio_control.run_journal import goal_to_dict, JournalError, JournalWriter,
 from helio_msgs.action import CalibrateWorld, FocusLens, MoveWrist, PaintPattern, SweepSun
 from helio_msgs.msg import DeviceStatus, FocalCalibration, SpotObservation, SunEstimate
 from helio_msgs.msg import ThermalStats
-from helio_optics.node_kit.awaitables import discovered, FirstOf, NextTurn
+from helio_optics.node_kit.awaitables import discovered, FirstOf, NextTurn, sleep
 from helio_optics.node_kit.conversions import point_to_array
 from helio_optics.node_kit.deployment import declare_rig, follow_world_calibration
 from helio_optics.node_kit.parameters import declare
@@ -230,6 +230,11 @@ class PainterNode(Node):
         self._busy = False
         self._thermal_interruptions = 0   # heatings broken off by a stale stream (this goal)
         self._cancel_requested = False
+        self._stop_signal = ''             # why the node stops mid-painting ('' while not)
+        self.interrupt_timeout = declare(
+            self, 'interrupt_timeout', 5.0,
+            'On Ctrl-C or SIGTERM, how long the running painting may take to put the focus '
+            'off the wood before the node stops [s wall].', 0.0, 60.0)
         self._at_heating = None            # (target, d_lp) while the lens is focused on wood
         self.create_subscription(ThermalStats, 'thermal/stats', self._on_stats, RELIABLE)
         self.create_subscription(SunEstimate, 'sun/estimate', self._on_sun, LATCHED)
@@ -473,7 +478,7 @@ class PainterNode(Node):
             result.message = 'busy: another painting runs'
             goal_handle.abort()
             return result
-        self._busy, self._cancel_requested = True, False
+        self._busy, self._cancel_requested, self._stop_signal = True, False, ''
         self._thermal_interruptions = 0
         wall_started = time.time()
         try:
@@ -494,8 +499,14 @@ class PainterNode(Node):
             else:
                 goal_handle.abort()
         except PaintCanceled:
-            result.message = 'canceled: ' + await self._retreat('cancel')
-            goal_handle.canceled()
+            if self._stop_signal and not goal_handle.is_cancel_requested:
+                # the node stopped (Ctrl-C, SIGTERM), not the client: the goal aborts
+                result.message = (f'stopped by {self._stop_signal}: '
+                                  + await self._retreat(self._stop_signal))
+                goal_handle.abort()
+            else:
+                result.message = 'canceled: ' + await self._retreat('cancel')
+                goal_handle.canceled()
         except PaintFailed as failure:
             result.message = f'{failure}; {await self._retreat(str(failure))}'
             goal_handle.abort()
@@ -805,6 +816,23 @@ class PainterNode(Node):
         raise PaintFailed(f'thermal statistics stale for more than {self.thermal_stale:g} s '
                           f'while heating dot {index}, and not back within '
                           f'{self.thermal_back_timeout:g} s')
+
+    async def on_interrupt(self):
+        """
+        Ctrl-C or SIGTERM of this node: end a running painting as a cancel does, then stop.
+
+        ``run_node`` runs this before the node goes (issue 30: a stop signal used to end the
+        node at once, the lens left heating; the graph's stop signals the painter first and
+        the lens planner, which carries the retreat out, after it). The painting's retreat
+        is awaited for at most ``interrupt_timeout`` [s wall].
+        """
+        if not self._busy:
+            return
+        self._stop_signal = 'a stop signal'
+        self._cancel_requested = True
+        self._wake_heating()
+        while self._busy:
+            await sleep(self, 0.02, wall=True)
 
     def destroy_node(self):
         """Leave the lens off the wood if a painting is cut short (best effort)."""

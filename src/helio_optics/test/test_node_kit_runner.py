@@ -1,5 +1,9 @@
 """run_node: every node's main() spins until shutdown and always cleans up."""
 
+import os
+import signal
+import time
+
 from helio_optics.node_kit.runner import run_node
 import pytest
 import rclpy
@@ -76,3 +80,59 @@ def test_rclpy_is_shut_down_even_when_destroy_node_raises():
     assert not rclpy.ok()
     rclpy.init(args=[])          # a later init works: nothing was left behind
     rclpy.shutdown()
+
+
+class StopsSafely(Node):
+    """A node with an on_interrupt coroutine: it publishes on the way out (still up)."""
+
+    interrupt_timeout = 2.0
+    log = []
+
+    def __init__(self):
+        super().__init__('helio_test_stops_safely')
+        self.publisher = self.create_publisher(JointState, 'stopping', 1)
+        self.create_timer(0.05, self._signal_once)
+        self._sent = 0
+
+    def _signal_once(self):
+        if not self._sent:       # what Ctrl-C does, from inside the process
+            self._sent = 1
+            os.kill(os.getpid(), signal.SIGINT)
+
+    async def on_interrupt(self):
+        from helio_optics.node_kit.awaitables import sleep
+        type(self).log.append('interrupted')
+        await sleep(self, 0.2, wall=True)         # the node still spins: timers run
+        self.publisher.publish(JointState(name=['still up']))
+        type(self).log.append(f'published, context ok: {rclpy.ok()}')
+
+    def destroy_node(self):
+        type(self).log.append('destroyed')
+        return super().destroy_node()
+
+
+class HangsOnTheWayOut(StopsSafely):
+    """An on_interrupt that never ends: the second signal (SIGTERM) stops the node."""
+
+    log = []
+
+    async def on_interrupt(self):
+        from helio_optics.node_kit.awaitables import sleep
+        type(self).log.append('interrupted')
+        os.kill(os.getpid(), signal.SIGTERM)
+        await sleep(self, 60.0, wall=True)
+
+
+def test_a_node_with_on_interrupt_acts_on_the_first_signal_before_it_goes():
+    before = signal.getsignal(signal.SIGINT)
+    run_node(StopsSafely, args=[])
+    # on_interrupt ran to its end (not cut at interrupt_timeout), the node still up
+    assert StopsSafely.log == ['interrupted', 'published, context ok: True', 'destroyed']
+    assert not rclpy.ok() and signal.getsignal(signal.SIGINT) is before
+
+
+def test_a_second_signal_stops_a_node_whose_on_interrupt_hangs():
+    started = time.monotonic()
+    run_node(HangsOnTheWayOut, args=[])
+    assert HangsOnTheWayOut.log == ['interrupted', 'destroyed']
+    assert time.monotonic() - started < 30.0 and not rclpy.ok()    # not the 60 s hang

@@ -168,9 +168,16 @@ class ProcessGroup:
     with its last log lines).
     """
 
-    def __init__(self, processes, on_death=None, poll_period=0.1):
-        """Keep `processes` (NodeProcess) to start in order and stop in reverse order."""
+    def __init__(self, processes, on_death=None, poll_period=0.1, stop_first=()):
+        """
+        Keep `processes` (NodeProcess) to start in order and stop in reverse order.
+
+        `stop_first`: labels of processes stopped one after the other, each awaited, before
+        the others are signalled (those that must act on the way out while the rest of the
+        graph still runs: the painter, then the lens planner, which retreat the lens).
+        """
         self.processes = list(processes)
+        self.stop_first = tuple(stop_first)
         self.deaths = []
         self._on_death = on_death
         self._stopping = threading.Event()
@@ -208,13 +215,24 @@ class ProcessGroup:
                                    f'last log lines:\n{dead.tail()}')
 
     def stop(self, interrupt_timeout=10.0, terminate_timeout=5.0):
-        """Stop every process (reverse order, SIGINT together first); return how each ended."""
+        """
+        Stop every process; return how each ended.
+
+        First the `stop_first` ones in their order, each given SIGINT and awaited (then
+        SIGTERM and SIGKILL after the timeouts); then the others, SIGINT together, awaited in
+        reverse order.
+        """
         self._stopping.set()
-        for process in self.processes:
+        outcomes = {}
+        for label in self.stop_first:
+            for process in self.processes:
+                if process.label == label and process.process is not None:
+                    outcomes[label] = process.stop(interrupt_timeout, terminate_timeout)
+        rest = [p for p in self.processes if p.label not in outcomes]
+        for process in rest:
             process.signal(signal.SIGINT)
         deadline = time.monotonic() + interrupt_timeout
-        outcomes = {}
-        for process in reversed(self.processes):
+        for process in reversed(rest):
             if process.process is None:
                 continue
             try:

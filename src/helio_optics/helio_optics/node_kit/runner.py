@@ -1,9 +1,14 @@
 """The main() of every helio node: spin one node until shutdown, then clean up."""
 
+import signal
+import time
+
 from helio_optics.node_kit.process_tuning import single_threaded_numerics
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
-from rclpy.executors import ExternalShutdownException
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
 
 
 def run_node(node_class, args=None):
@@ -18,16 +23,29 @@ def run_node(node_class, args=None):
 
     Numeric libraries run on one thread (`single_threaded_numerics`), set before the node is
     built and again after (a library its constructor loaded); the node logs the pools.
+
+    A node class with an ``on_interrupt`` coroutine method (the painter, the lens planner:
+    the nodes that can leave the focus on the wood) is stopped safely: the first Ctrl-C or
+    SIGTERM runs ``on_interrupt`` on the node's executor, the node still up, for at most its
+    ``interrupt_timeout`` seconds (default 5) of wall time, and only then the node is
+    destroyed; a second signal stops it at once (`spin_until_interrupt_done`).
     """
     single_threaded_numerics()
-    rclpy.init(args=args)
+    safe_stop = hasattr(node_class, 'on_interrupt')
+    # rclpy's own handler shuts the context down at the first signal: nothing could be
+    # published after it, so a node that must act on the way out takes the signals itself
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO if safe_stop
+               else None)
     node = None
     try:
         node = node_class()
         pools = single_threaded_numerics()
         node.get_logger().info('numeric thread pools: ' + ', '.join(
             f'{name} {count}' for name, count in sorted(pools.items())))
-        rclpy.spin(node)
+        if safe_stop:
+            spin_until_interrupt_done(node)
+        else:
+            rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
@@ -39,6 +57,52 @@ def run_node(node_class, args=None):
                 node.destroy_node()
         finally:
             _shut_down()
+
+
+def spin_until_interrupt_done(node, poll_period=0.05):
+    """
+    Spin `node` until a Ctrl-C or SIGTERM and its ``on_interrupt`` coroutine have ended.
+
+    The signal's handler only schedules ``on_interrupt`` on the executor (a Python handler
+    runs between the executor's waits, which a steady timer ends at least every
+    `poll_period`: a wait with a timeout would build a timer at every wait). The spin goes on
+    until the coroutine is done or ``interrupt_timeout`` [s wall] has passed since the
+    signal; a second signal raises KeyboardInterrupt.
+    """
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    state = {}
+    waker = node.create_timer(poll_period, lambda: None,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def on_signal(signum, _frame):
+        if state:
+            raise KeyboardInterrupt     # the second signal: stop now
+        name = signal.Signals(signum).name
+        node.get_logger().warning(f'{name}: stopping safely first ({node.get_name()})')
+        state['deadline'] = time.monotonic() + getattr(node, 'interrupt_timeout', 5.0)
+        state['task'] = executor.create_task(node.on_interrupt)
+
+    previous = {signum: signal.signal(signum, on_signal)
+                for signum in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        while rclpy.ok():
+            executor.spin_once()
+            task = state.get('task')
+            if task is None:
+                continue
+            if task.done():
+                if task.exception() is not None:
+                    node.get_logger().error(f'stopping safely failed: {task.exception()!r}')
+                return
+            if time.monotonic() > state['deadline']:
+                node.get_logger().error('stopping safely did not end within interrupt_timeout')
+                return
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        node.destroy_timer(waker)
+        executor.remove_node(node)
 
 
 def _shut_down():
