@@ -226,6 +226,17 @@ def test_a_hung_node_is_escalated_to_sigkill(tmp_path):
     assert not any(alive(pid) for pid in pids.values())
 
 
+def test_the_nodes_of_a_killed_supervisor_stop_with_it(tmp_path):
+    """helio sim killed outright (SIGKILL: it cannot stop them) takes its nodes with it."""
+    # they used to run on, orphaned: a test's timed-out `helio paint` left a whole simulated
+    # graph running for 40 minutes beside the next test runs (2026-11-27)
+    process, pids = start_sim(tmp_path, 'sim_world', 'thermal_monitor')
+    process.kill()
+    process.wait(30)
+    wait_for(lambda: not any(alive(pid) for pid in pids.values()), 60.0,
+             'the nodes of the killed helio sim to stop')
+
+
 # ---------------------------------------------------------------------------- bringup/launch
 def test_the_launch_entries_are_what_the_runner_starts(tmp_path):
     specs = simulated_graph(str(tmp_path))

@@ -5,13 +5,17 @@ Nodes as separate processes, the way a user runs them (``ros2 run`` / a launch f
 found through the ament index like ``ros2 run``) with ``--ros-args``: a parameter file written
 for it, remaps, a namespace, and its output captured to a log file. ``ProcessGroup`` starts
 several, notices at once when one dies (with its last log lines), and stops them all cleanly:
-SIGINT, then SIGTERM, then SIGKILL, each after a timeout; no process is left behind.
+SIGINT, then SIGTERM, then SIGKILL, each after a timeout; no process is left behind. A node
+also gets SIGTERM from the kernel when the process that started it dies (killed with
+SIGKILL, say, where it cannot stop its nodes): each is started through util-linux's
+``setpriv --pdeathsig TERM`` where that is installed. Its nodes used to run on, orphaned.
 
 No rclpy import: tests, the bringup runner and the command line share this.
 """
 
 import collections
 import os
+import shutil
 import signal
 import subprocess
 import tempfile
@@ -99,12 +103,16 @@ class NodeProcess:
         return command + extra[1:]
 
     def start(self):
-        """Start the process (its own process group); return self."""
+        """Start the process (its own process group, SIGTERM when we die); return self."""
         os.makedirs(self.log_dir, exist_ok=True)
+        command = self.command()
+        setpriv = shutil.which('setpriv')
+        if setpriv:         # the kernel signals it when this thread's process dies
+            command = [setpriv, '--pdeathsig', 'TERM', '--'] + command
         log = open(self.log_path, 'ab')
         try:
             self.process = subprocess.Popen(
-                self.command(), stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                command, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                 env=self.env, start_new_session=True)
         finally:
             log.close()
