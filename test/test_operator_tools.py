@@ -227,7 +227,7 @@ def test_a_hung_node_is_escalated_to_sigkill(tmp_path):
 
 
 def test_the_nodes_of_a_killed_supervisor_stop_with_it(tmp_path):
-    """helio sim killed outright (SIGKILL: it cannot stop them) takes its nodes with it."""
+    """A helio sim killed outright (SIGKILL: it cannot stop them) takes its nodes along."""
     # they used to run on, orphaned: a test's timed-out `helio paint` left a whole simulated
     # graph running for 40 minutes beside the next test runs (2026-11-27)
     process, pids = start_sim(tmp_path, 'sim_world', 'thermal_monitor')
