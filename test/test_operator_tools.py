@@ -57,7 +57,8 @@ def alive(pid):
 
 
 # ---------------------------------------------------------------------------- the command
-@pytest.mark.parametrize('command', ['sim', 'rig', 'paint', 'record', 'replay', 'report'])
+@pytest.mark.parametrize('command', ['sim', 'rig', 'paint', 'record', 'replay', 'report',
+                                     'udev'])
 def test_every_sub_command_has_help(command):
     done = helio(command, '--help')
     assert done.returncode == 0 and 'usage: helio' in done.stdout

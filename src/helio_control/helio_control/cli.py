@@ -10,6 +10,7 @@ The ``helio`` command: run the graph, paint, record, replay, report.
     helio record --out DIR [--camera-decimation N] [--sim-time] | --recover BAG
     helio replay BAG [--rate R] [--delay S] [--exclude TOPIC ...]
     helio report RUN_DIR
+    helio udev [--install]                           (the serial devices' udev rule)
 
 Every sub-command has ``--help``. Exit status: 0 done, 1 failed (one line on stderr, no
 traceback), 2 bad usage, 130 interrupted (Ctrl-C). The options of ``paint`` are generated
@@ -22,6 +23,7 @@ import datetime
 import math
 import os
 import signal
+import subprocess
 import sys
 import tempfile
 import threading
@@ -281,6 +283,26 @@ def command_report(arguments):
     from helio_control.report import make_report
     report = make_report(arguments.run_dir)
     print(report.html_path)
+    return EXIT_OK
+
+
+def command_udev(arguments):
+    """Print the udev rule of the serial devices; with --install, write and load it."""
+    from helio_control.udev_rules import RULES_PATH, udev_rules
+    text = udev_rules()
+    if not arguments.install:
+        print(text, end='')
+        return EXIT_OK
+    if os.geteuid() != 0:
+        raise CommandError(f'writing {RULES_PATH} needs root: run "sudo $(which helio) udev '
+                           '--install", or print the rule with "helio udev" and install it '
+                           'yourself')
+    with open(RULES_PATH, 'w') as stream:
+        stream.write(text)
+    for command in (['udevadm', 'control', '--reload-rules'], ['udevadm', 'trigger']):
+        subprocess.run(command, check=True)
+    print(f'{RULES_PATH} written and loaded; add yourself to the dialout group once: sudo '
+          'usermod -aG dialout $USER (then log in again)', file=sys.stderr)
     return EXIT_OK
 
 
@@ -576,6 +598,14 @@ def build_parser(action_type=None):
                                  'into RUN_DIR.')
     report.add_argument('run_dir', help='run directory (runs/<UTC time>)')
     report.set_defaults(handler=command_report)
+
+    udev = commands.add_parser('udev', help="the udev rule of the rig's serial devices",
+                               description='Print the udev rule that gives the Dobot and the '
+                               'Maestro to the dialout group as /dev/helio_dobot and '
+                               '/dev/helio_maestro; --install writes and loads it (root).')
+    udev.add_argument('--install', action='store_true',
+                      help='write /etc/udev/rules.d/99-helio.rules and reload udev (root)')
+    udev.set_defaults(handler=command_udev)
     return parser
 
 
