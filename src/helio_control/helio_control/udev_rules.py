@@ -9,6 +9,8 @@ them as ``/dev/helio_dobot`` and ``/dev/helio_maestro``. The USB ids are the dri
 (``DOBOT_USB_IDS``, ``MAESTRO_USB_IDS``): one list for auto-detection and for udev.
 """
 
+from helio_drivers.serial_link import parse_usb_id
+
 RULES_PATH = '/etc/udev/rules.d/99-helio.rules'
 GROUP = 'dialout'
 
@@ -28,17 +30,10 @@ def udev_rules(dobot_ids=None, maestro_ids=None, group=GROUP):
                               # the command port: the first of the Maestro's two ports
                               ', ENV{ID_USB_INTERFACE_NUM}=="00"')):
         for usb_id in ids:
-            vendor, product = _split(usb_id)
-            lines.append(f'SUBSYSTEM=="tty", ATTRS{{idVendor}}=="{vendor}", '
-                         f'ATTRS{{idProduct}}=="{product}"{extra}, MODE="0660", '
-                         f'GROUP="{group}", SYMLINK+="{name}"')
+            # the drivers' own parser: 'vvvv:pppp', or 'vvvv' for every product of a vendor
+            vendor, product = parse_usb_id(usb_id)
+            match = f'ATTRS{{idVendor}}=="{vendor:04x}"' + (
+                '' if product is None else f', ATTRS{{idProduct}}=="{product:04x}"')
+            lines.append(f'SUBSYSTEM=="tty", {match}{extra}, MODE="0660", GROUP="{group}", '
+                         f'SYMLINK+="{name}"')
     return '\n'.join(lines) + '\n'
-
-
-def _split(usb_id):
-    vendor, separator, product = usb_id.lower().partition(':')
-    if not separator or len(vendor) != 4 or len(product) != 4 or not all(
-            c in '0123456789abcdef' for c in vendor + product):
-        raise ValueError(f'a USB id is vendor:product in hexadecimal (e.g. 10c4:ea60), '
-                         f'not {usb_id!r}')
-    return vendor, product

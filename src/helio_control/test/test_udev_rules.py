@@ -26,7 +26,7 @@ def test_every_adapter_of_the_drivers_gets_the_dialout_group_and_a_stable_name()
 
 
 def test_a_bad_usb_id_is_refused_by_name():
-    with pytest.raises(ValueError, match="not '10c4ea60'"):
+    with pytest.raises(ValueError, match="USB id '10c4ea60' is not"):
         udev_rules(dobot_ids=['10c4ea60'], maestro_ids=[])
 
 
