@@ -146,7 +146,8 @@ def straightforward_rgb(world, light, attenuation, rng=None):
     wood = decode_srgb8(make_panel_texture(
         extent=world.panel.extent, metres_per_pixel=world.settings.grid.fine_cell,
         marker_side=world.settings.marker_side, marker_id=world.settings.marker_id,
-        dictionary=world.settings.marker_dictionary, seed=world.settings.seed).image)
+        dictionary=world.settings.marker_dictionary, seed=world.settings.seed,
+        print_reflectance=world.settings.marker_print_reflectance).image)
     chi = np.asarray(world.panel.char, dtype=np.float32)[:, :, None]   # rows from y_min
     albedo = np.flipud(wood) * (1.0 - chi) + decode_srgb8(np.array([CHAR_RGB], np.uint8)) * chi
     direct = np.ones(chi.shape[:2], np.float32)

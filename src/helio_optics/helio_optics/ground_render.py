@@ -150,7 +150,7 @@ def aruco_dictionary(name):
 def make_panel_texture(extent=(-0.05, 0.15, -0.05, 0.15), metres_per_pixel=2e-4,
                        marker_side=0.04, marker_id=0, dictionary='DICT_4X4_50',
                        quiet_zone=0.006, wood_rgb=WOOD_RGB, grain=0.06, seed=0,
-                       sheet_margins=None):
+                       sheet_margins=None, print_reflectance=(0.0, 1.0)):
     """
     Make an RGB wood panel texture (8-bit sRGB) with an ArUco marker centred on the origin.
 
@@ -160,6 +160,8 @@ def make_panel_texture(extent=(-0.05, 0.15, -0.05, 0.15), metres_per_pixel=2e-4,
     world -x, +x, -y, +y. The marker image from `cv2.aruco.generateImageMarker` is placed so
     that its top-left corner is at (-side/2, +side/2): the marker frame's x/y axes are the
     world x/y axes. `grain` is the relative amplitude of a smooth random wood grain.
+    `print_reflectance` (ink, paper) is the linear reflectance of the marker's black and white
+    (see `draw_marker`).
     """
     x_min, x_max, y_min, y_max = extent
     width = int(round((x_max - x_min) / metres_per_pixel))
@@ -175,18 +177,28 @@ def make_panel_texture(extent=(-0.05, 0.15, -0.05, 0.15), metres_per_pixel=2e-4,
                     0, 255).astype(np.uint8)
     texture = GroundTexture(image=image, extent=tuple(extent))
     if marker_side > 0:
-        draw_marker(texture, marker_side, marker_id, dictionary, quiet_zone, sheet_margins)
+        draw_marker(texture, marker_side, marker_id, dictionary, quiet_zone, sheet_margins,
+                    print_reflectance)
     return texture
 
 
 def draw_marker(texture, side, marker_id=0, dictionary='DICT_4X4_50', quiet_zone=0.006,
-                sheet_margins=None):
+                sheet_margins=None, print_reflectance=(0.0, 1.0)):
     """
     Draw an ArUco marker (black square `side` [m]) centred on the world origin in place.
 
     The white paper around it is `quiet_zone` [m] wide on every side, or `sheet_margins`
     (left, right, bottom, top) [m] from the black square along world -x, +x, -y, +y.
+    `print_reflectance` (ink, paper) [0-1] is the linear reflectance of the black and the
+    white: (0, 1) is an ideal print; a laser print on office paper reflects about 4-6 % and
+    80-90 %, which is what decides whether the black in full sun is darker than the white
+    in a shadow (only the sky's light).
     """
+    ink, paper = (float(v) for v in print_reflectance)
+    if not 0.0 <= ink < paper <= 1.0:
+        raise ValueError(f'print_reflectance must be (ink, paper) with 0 <= ink < paper <= 1, '
+                         f'got {print_reflectance}')
+    black, white = (int(round(255.0 * float(linear_to_srgb(v)))) for v in (ink, paper))
     sx, sy = texture.metres_per_pixel
     if abs(sx - sy) > 1e-12 * max(sx, sy):
         raise ValueError('draw_marker needs square texture pixels')
@@ -204,9 +216,10 @@ def draw_marker(texture, side, marker_id=0, dictionary='DICT_4X4_50', quiet_zone
     c0, r0, c1, r1 = (int(round(v + 0.5)) for v in (c0, r0, c1, r1))
     if c0 < 0 or r0 < 0 or c1 > texture.image.shape[1] or r1 > texture.image.shape[0]:
         raise ValueError('the marker and its quiet zone do not fit in the texture extent')
-    texture.image[r0:r1, c0:c1] = 255
+    texture.image[r0:r1, c0:c1] = white
     pixels = int(round(side / sx))
     marker = cv2.aruco.generateImageMarker(aruco_dictionary(dictionary), marker_id, pixels, 1)
+    marker = np.where(marker > 127, white, black).astype(np.uint8)
     mc, mr = texture.texture_coordinates(-h, h)
     mc, mr = int(round(mc + 0.5)), int(round(mr + 0.5))
     patch = marker if texture.image.ndim == 2 else marker[:, :, None]

@@ -57,6 +57,24 @@ def test_marker_corners_are_where_aruco_finds_them():
     assert np.max(np.linalg.norm(corners[0][0] - expected, axis=1)) < 0.5
 
 
+def test_a_printed_marker_reflects_its_ink_and_paper_shares_in_linear_light():
+    texture = make_panel_texture(marker_side=0.04, print_reflectance=(0.05, 0.85)).linearised()
+    # world (x, y) -> texture pixel: the black border's middle and the quiet zone's
+    black = texture.image[texture_pixel(texture, -0.019, 0.0)]
+    white = texture.image[texture_pixel(texture, -0.0225, 0.0)]
+    # 8-bit sRGB steps near these levels are under 1 % of the value
+    assert np.allclose(black, 0.05, rtol=0.02) and np.allclose(white, 0.85, rtol=0.01)
+    for bad in [(0.5, 0.4), (-0.1, 0.9), (0.05, 1.2)]:
+        with pytest.raises(ValueError, match='print_reflectance'):
+            make_panel_texture(print_reflectance=bad)
+
+
+def texture_pixel(texture, x, y):
+    """Return the (row, column) of the texture pixel holding the world point (x, y)."""
+    column, row = texture.texture_coordinates(x, y)
+    return int(round(row)), int(round(column))
+
+
 def test_spot_area_in_pixels_matches_the_ellipse_area_seen_from_above():
     height = 0.2
     camera = PinholeCamera.from_fov(320, 240, np.radians(50))

@@ -212,6 +212,22 @@ class MarkerConfig:
     response: str = 'srgb'           # the camera's tone curve: 'srgb' (webcams) or 'linear'
     max_edge_width: float = 4.5      # sharper frames: outer edges' 10-90 % rise up to this [px]
     max_clipped_fraction: float = 0.5  # over-exposed: more of the outline's white at full scale
+    # the marker's edges' crossings lie within about 0.25 px (rms) of their lines; farther, the
+    # corners are not trusted [px]
+    max_edge_residual: float = 1.0
+    # global levels tried when the adaptive threshold finds no marker (a lens shadow across
+    # it): fractions of the frame's bright level (99th percentile, linear light); the black
+    # in full sun and the white in the shadow lie 3-12 % of it apart for a printed marker
+    shadow_levels: tuple = (0.025, 0.032, 0.04, 0.05, 0.063, 0.079, 0.1, 0.125)
+
+    def __post_init__(self):
+        """Refuse shadow levels outside (0, 1) and a non-positive edge residual limit."""
+        self.shadow_levels = tuple(float(level) for level in self.shadow_levels)
+        if not all(0.0 < level < 1.0 for level in self.shadow_levels):
+            raise ValueError(f'shadow_levels must be fractions in (0, 1), got '
+                             f'{self.shadow_levels}')
+        if not self.max_edge_residual > 0.0:
+            raise ValueError(f'max_edge_residual must be > 0 px, got {self.max_edge_residual}')
 
 
 class MarkerDetector:
@@ -241,6 +257,7 @@ class MarkerDetector:
         """
         offset = np.zeros(2)
         image = gray
+        x0, y0, x1, y1 = 0, 0, gray.shape[1], gray.shape[0]
         if roi is not None:
             x0, y0, x1, y1 = roi
             image = gray[y0:y1, x0:x1]
@@ -255,11 +272,7 @@ class MarkerDetector:
         scales = [first, first / 2, first / 4] + ([1.0] if first < 1.0 else [])
         wanted = self.config.marker_id
         seen, rejected_quads = set(), []
-        for scale in scales:
-            if image.shape[1] * scale < 32 or image.shape[0] * scale < 32:
-                continue
-            small = image if scale == 1.0 else cv2.resize(
-                image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        for scale, small in self._candidate_images(image, gray[y0:y1, x0:x1], scales):
             corners, ids, rejected = self._detector.detectMarkers(small)
             # pixel centres at integers: x_full = (x_small + 0.5) / scale - 0.5
             corners = [(c.reshape(-1, 2) + 0.5) / scale - 0.5 + offset for c in corners]
@@ -282,6 +295,11 @@ class MarkerDetector:
                         f'marker over-exposed: its white is at full scale along '
                         f'{100 * fit.clipped_fraction:.0f} % of its outline (the pose would '
                         'be biased: lower the exposure or gain)'))
+                if fit.line_residual > self.config.max_edge_residual:
+                    return MarkerResult(reason=(
+                        f'marker edges not straight: their crossings lie {fit.line_residual:.2f}'
+                        f' px (rms) from the fitted lines (> {self.config.max_edge_residual:g}'
+                        ' px): a shadow or glare across them'))
                 result = self.pose_from_corners(best, camera, stamp)
                 if result.pose is not None:
                     result.pose.edge_width = fit.edge_width
@@ -295,6 +313,37 @@ class MarkerDetector:
         others = sorted(seen - {wanted})
         extra = f' (saw ids {others})' if others else ''
         return MarkerResult(reason=f'marker {wanted} not found{extra}')
+
+    def _candidate_images(self, linear8, gray, scales):
+        """
+        Yield (scale, image) for cv2.aruco: the adaptive threshold's images, then shadow levels.
+
+        First `linear8` at each of `scales` (cv2.aruco's adaptive threshold). Then, when the
+        lens' shadow crosses the marker, the adaptive threshold marks the shadow's edge, which
+        joins the black border to the shaded wood and leaves no quad; but a printed marker's
+        black in full sun (ink x (sun + sky)) is still darker than its white in the shadow
+        (paper x sky), so one global level between them gives the marker whole: `gray`
+        thresholded at ``shadow_levels`` fractions of its bright level (99th percentile,
+        linear light), at the first scale, darkest level first.
+        """
+        for scale in scales:
+            if linear8.shape[1] * scale < 32 or linear8.shape[0] * scale < 32:
+                continue
+            yield scale, linear8 if scale == 1.0 else cv2.resize(
+                linear8, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        scale = scales[0]
+        gray = np.ascontiguousarray(gray)
+        small = gray if scale == 1.0 else cv2.resize(gray, None, fx=scale, fy=scale,
+                                                     interpolation=cv2.INTER_AREA)
+        bright = float(self._to_linear[percentile_level(
+            np.ascontiguousarray(small[::2, ::2]), None, 99.0)])
+        tried = set()
+        for fraction in self.config.shadow_levels:
+            level = int(np.searchsorted(self._to_linear, fraction * bright))
+            if level in tried or not 0 < level < 255:
+                continue
+            tried.add(level)
+            yield scale, np.where(small >= level, 255, 0).astype(np.uint8)
 
     def _linear8(self, image):
         """
@@ -421,13 +470,15 @@ class EdgeFit:
     `corners` (4, 2) [px]; `contrast` the smallest edge's mean linear step from inside to
     outside (0: the fit failed and `corners` are the input); `edge_width` the widest edge's
     median 10-90 % rise [px]; `clipped_fraction` the share of edge profiles whose white side
-    is at the sensor's full scale (over-exposed) [-].
+    is at the sensor's full scale (over-exposed) [-]; `line_residual` the largest rms
+    distance of an edge's crossings from its fitted line [px].
     """
 
     corners: np.ndarray
     contrast: float = 0.0
     edge_width: float = math.nan
     clipped_fraction: float = 0.0
+    line_residual: float = math.nan
 
 
 def percentile_level(image, mask, percent):
@@ -504,6 +555,11 @@ def refine_corners_from_edges(gray, corners, camera, samples=24, reach=3.0, step
     clipped = profiles[:, -3:].mean(axis=1) >= 0.99 * float(table[-1])
     usable &= np.isfinite(crossing)
     widths = _rise_widths(normalised, step)
+    # a profile with two steps (a shadow's edge or the spot's glare within reach of the
+    # marker's edge) rises over a wider span than the frame's blur: its crossing is not the
+    # edge's
+    if np.any(usable):
+        usable &= widths <= 1.6 * float(np.median(widths[usable])) + 0.3
     points = base.reshape(-1, 2) + crossing[:, None] * np.repeat(normals, samples, axis=0)
     usable = usable.reshape(4, samples)
     contrasts = rise.reshape(4, samples).mean(axis=1)
@@ -512,12 +568,14 @@ def refine_corners_from_edges(gray, corners, camera, samples=24, reach=3.0, step
     edge_widths = [float(np.median(widths.reshape(4, samples)[i][usable[i]])) for i in range(4)]
     rays = camera.pixel_rays(np.where(np.isfinite(points), points, 0.0))  # unusable: unused
     normalised_points = (rays[:, :2] / rays[:, 2:3]).reshape(4, samples, 2)
-    lines = []
+    pixel_scale = float(camera.matrix[0, 0])   # normalised coordinates to pixels
+    lines, residuals = [], []
     for i in range(4):
-        edge = normalised_points[i][usable[i]]
-        mean = edge.mean(axis=0)
-        _, _, vt = np.linalg.svd(edge - mean)
-        lines.append((mean, vt[0]))
+        fitted = _robust_line(normalised_points[i][usable[i]], pixel_scale, samples // 2)
+        if fitted is None:
+            return EdgeFit(corners)
+        lines.append(fitted[:2])
+        residuals.append(fitted[2])
     refined = []
     for i in range(4):
         (p, d), (q, e) = lines[(i - 1) % 4], lines[i]
@@ -532,7 +590,31 @@ def refine_corners_from_edges(gray, corners, camera, samples=24, reach=3.0, step
     if np.max(np.linalg.norm(refined - corners, axis=1)) > max_shift:
         return EdgeFit(corners)  # the fit disagrees with the detector: keep its corners
     return EdgeFit(refined, float(min(contrasts)), float(max(edge_widths)),
-                   float(np.mean(clipped[usable.ravel()])))
+                   float(np.mean(clipped[usable.ravel()])), float(max(residuals)))
+
+
+def _robust_line(points, pixel_scale, least, max_distance=0.15):
+    """
+    Fit a line to an edge's crossings, leaving out those off it; (point, direction, rms).
+
+    Total least squares (SVD), then the points farther than `max_distance` px or four
+    robust standard deviations (median absolute deviation) from the line are left out and
+    the line fitted again, until none is; None when fewer than `least` points remain. The
+    rms [px] is of the points kept.
+    """
+    keep = np.ones(len(points), bool)
+    while True:
+        if keep.sum() < max(least, 2):
+            return None
+        mean = points[keep].mean(axis=0)
+        _, _, vt = np.linalg.svd(points[keep] - mean)
+        normal = np.array([-vt[0][1], vt[0][0]])
+        distances = np.abs((points - mean) @ normal) * pixel_scale
+        spread = 1.4826 * float(np.median(distances[keep]))
+        inside = distances <= max(max_distance, 4.0 * spread)
+        if np.array_equal(inside & keep, keep):
+            return mean, vt[0], float(np.sqrt(np.mean(distances[keep] ** 2)))
+        keep &= inside
 
 
 def _rise_widths(normalised, step):

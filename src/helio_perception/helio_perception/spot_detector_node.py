@@ -104,6 +104,15 @@ class SpotDetectorNode(Node):
             max_clipped_fraction=declare(self, 'marker.max_clipped_fraction', 0.5,
                                          "Refuse the marker when more of its outline's white "
                                          'is at full scale (over-exposed) [-].', 0.0, 1.0),
+            max_edge_residual=declare(self, 'marker.max_edge_residual_pixels', 1.0,
+                                      "Refuse the marker when its outer edges' crossings lie "
+                                      'farther (rms) from their fitted lines: a shadow or glare '
+                                      'across them [px].', 0.05, 10.0),
+            shadow_levels=tuple(declare(
+                self, 'marker.shadow_levels', list(MarkerConfig.shadow_levels),
+                'Global grey levels tried when the adaptive threshold finds no marker (the '
+                "lens' shadow across it), as fractions of the frame's bright level in linear "
+                'light (empty: none) [-].')),
             response=response)
         spot = SpotConfig(
             threshold_mode=declare(self, 'spot.threshold_mode', 'auto',

@@ -385,8 +385,13 @@ class RgbCamera:
     """Renders the lit panel, the marker, the char and the light spot as a webcam does."""
 
     def __init__(self, panel_extent, pixel_size, settings=None, marker_side=0.04,
-                 marker_id=0, dictionary='DICT_4X4_50', seed=0):
-        """Build the panel's albedo texture (pixels aligned with the char raster)."""
+                 marker_id=0, dictionary='DICT_4X4_50', seed=0, print_reflectance=(0.0, 1.0)):
+        """
+        Build the panel's albedo texture (pixels aligned with the char raster).
+
+        `print_reflectance` (ink, paper): the marker print's linear reflectance
+        (``ground_render.draw_marker``).
+        """
         self.settings = settings or RgbSettings()
         self.camera = self.settings.camera()
         self._renderer = GroundRenderer(self.camera, supersample=self.settings.supersample)
@@ -397,7 +402,8 @@ class RgbCamera:
                           if noisy and not s.bayer and not s.exact_read_out else None)
         texture = make_panel_texture(extent=panel_extent, metres_per_pixel=pixel_size,
                                      marker_side=marker_side, marker_id=marker_id,
-                                     dictionary=dictionary, seed=seed)
+                                     dictionary=dictionary, seed=seed,
+                                     print_reflectance=print_reflectance)
         self.extent = tuple(panel_extent)
         self.pixel_size = float(pixel_size)
         # linear, rows from y_max (top view); RGB and a fourth, empty channel: OpenCV warps

@@ -65,6 +65,9 @@ class SimSettings:
     marker_side: float = 0.04
     marker_id: int = 0
     marker_dictionary: str = 'DICT_4X4_50'
+    # a laser print on office paper: in full sun its black is still darker than its white in
+    # the lens shadow (sky light only), by a factor of about 2 (an ideal print: 0, 1)
+    marker_print_reflectance: tuple = (0.05, 0.85)   # (ink, paper), linear [-]
     rgb: RgbSettings = field(default_factory=RgbSettings)
     thermal: ThermalSettings = field(default_factory=ThermalSettings)
 
@@ -190,7 +193,8 @@ class SimWorld:
         self.panel = WoodPanel(s.wood, s.grid, s.panel_extent)
         self.thermal = ThermalCamera(s.thermal, seed=s.seed)
         self.rgb = RgbCamera(self.panel.extent, s.grid.fine_cell, s.rgb, s.marker_side,
-                             s.marker_id, s.marker_dictionary, seed=s.seed)
+                             s.marker_id, s.marker_dictionary, seed=s.seed,
+                             print_reflectance=s.marker_print_reflectance)
         self._rng = np.random.default_rng(s.seed)
         self._joints_source = joints
         self._holding_joints = self._joints_held = False     # one_instant

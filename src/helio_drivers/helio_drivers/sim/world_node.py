@@ -173,6 +173,8 @@ PARAMETER_DOCS = {
     'marker_side': ('ArUco marker black square side [m]', 0.0, 0.5),
     'marker_id': ('ArUco marker id', 0, 1000),
     'marker_dictionary': ('ArUco dictionary name', None, None),
+    'marker_print_reflectance': ("the marker print's linear reflectance [ink, paper] [-]",
+                                 None, None),
     'rgb.width': ('RGB image width [px]', 16, 4096),
     'rgb.height': ('RGB image height [px]', 16, 4096),
     'rgb.horizontal_fov': ('RGB horizontal field of view [rad]', 0.1, 3.0),
