@@ -36,7 +36,9 @@ ends, as each try would cost as long again; the link is reset, the goal ends at 
 the stop is not confirmed, and the reconnection stops the device as soon as it answers. A
 silent device so ends its goal within (retries + 1) reply timeouts (the Maestro client also
 drains the line for a timeout after each) plus one poll period: 0.6 s with either driver's
-defaults.
+defaults; ``silence_timeout`` caps that wait whatever the attempts: the simulated graph
+gives its emulators 0.5 s a reply (a busy machine) and 1.0 s in all, so a frozen world ends
+a move within 1.1 s.
 
 Time (issue 31): beside a simulated world the driver is clocked by ``/clock``. The joints are
 read and published every ``1/joint_state_rate`` of the node clock (simulated seconds under
@@ -156,6 +158,12 @@ class DeviceActionNode(Node):
                           0.005, 10.0)
         retries = declare(self, 'retries', 2, 'Extra attempts after a bad or missing reply.',
                           0, 10)
+        silence_timeout = declare(
+            self, 'silence_timeout', 0.0,
+            'A request left without a valid reply this long in all (its attempts and the '
+            'waits for late replies together) fails at once: the device is silent, the goal '
+            'ends (0: no such limit, (retries + 1) timeouts, and the Maestro waits a timeout '
+            'for a late reply after each) [s].', 0.0, 60.0)
         rate = declare(self, 'joint_state_rate', 20.0,
                        'Rate of joint polling and /joint_states, on the node clock (simulated '
                        'time under use_sim_time) and on the wall clock, whichever is first '
@@ -186,6 +194,7 @@ class DeviceActionNode(Node):
 
         port = '' if self.port_setting == AUTO_PORT else self.port_setting
         self.client = client_class(port, baudrate, timeout, retries)
+        self.client.silence_timeout = silence_timeout
         self.backoff = ReconnectBackoff(initial, maximum)
         self._message = ''
         self._alarms = []
@@ -619,8 +628,25 @@ class DeviceActionNode(Node):
         self._wake.set()
         return CancelResponse.ACCEPT
 
+    def goal_problem(self, goal):
+        """
+        Return why a goal's values cannot be a move ('' when they can); no device state.
+
+        Called in the executor before the goal reaches the device thread: a subclass refuses
+        non-finite numbers, unknown modes and targets beyond the kinematic limits here, so
+        that no bad value is ever handed to the device's client (issue 35).
+        """
+        return ''
+
     async def _execute(self, goal_handle):
         try:
+            problem = self.goal_problem(goal_handle.request)
+            if problem:
+                result = self.action_type.Result()
+                result.success, result.message = False, problem
+                goal_handle.abort()
+                self.get_logger().warning(f'{self.spec.action_name} refused: {problem}')
+                return result
             run = DeviceJob('move', lambda: self.plan_move(goal_handle.request),
                             self.start_move, self.poll_move, self.move_timeout,
                             self.move_wall_timeout, handle=goal_handle)

@@ -169,18 +169,21 @@ class DobotDriverNode(DeviceActionNode):
                 f'{what} refused: the dobot has active alarms ({"; ".join(alarms)}); remove '
                 'the cause, then call the dobot/clear_alarms service (std_srvs/srv/Trigger)')
 
-    def plan_move(self, goal):
-        """Return (mode, SI target); refuse a bad mode, a target beyond a limit, an alarm."""
+    def goal_problem(self, goal):
+        """Return why a goal is no move: an unknown mode, a non-finite or unreachable target."""
         mode = goal.mode
         if mode not in MODES:
-            raise GoalRefused(f'mode {mode} is not MOVJ_XYZ (1), MOVL_XYZ (2) or MOVJ_ANGLE (4)')
-        target = list(goal.target)
+            return f'mode {mode} is not MOVJ_XYZ (1), MOVL_XYZ (2) or MOVJ_ANGLE (4)'
         try:
-            check_target(self.client.arm, mode, target)
+            check_target(self.client.arm, mode, list(goal.target))
         except (UnreachableError, ValueError) as error:
-            raise GoalRefused(f'{MODES[mode]} target refused: {error}') from error
-        self._refuse_while_alarmed(f'{MODES[mode]} goal')
-        return mode, target
+            return f'{MODES[mode]} target refused: {error}'
+        return ''
+
+    def plan_move(self, goal):
+        """Return (mode, SI target) of a checked goal (``goal_problem``); refuse an alarm."""
+        self._refuse_while_alarmed(f'{MODES[goal.mode]} goal')
+        return goal.mode, list(goal.target)
 
     def start_move(self, plan):
         """Queue the move; return (mode, target, queue index)."""

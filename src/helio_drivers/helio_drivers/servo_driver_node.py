@@ -230,15 +230,21 @@ class ServoDriverNode(DeviceActionNode):
             self.get_logger().warning(f'Maestro errors: {", ".join(errors)}')
         return errors
 
+    def goal_problem(self, goal):
+        """Return why a goal is no move: an angle not finite or beyond its calibration."""
+        for axis in AXES:
+            try:
+                self.axes[axis][0].quarter_us(getattr(goal, axis))
+            except ValueError as error:
+                return f'wrist target refused: {error}'
+        return ''
+
     def plan_move(self, goal):
-        """Return (each axis's target [quarter-us], escape); refuse out-of-range angles."""
+        """Return (each axis's target [quarter-us], escape); refuse what the Maestro limits."""
         plan = {}
         for axis in AXES:
             calibration = self.axes[axis][0]
-            try:
-                target = calibration.quarter_us(getattr(goal, axis))
-            except ValueError as error:
-                raise GoalRefused(f'wrist target refused: {error}') from error
+            target = calibration.quarter_us(getattr(goal, axis))   # checked: goal_problem
             low, high = self.device_limits_qus.get(axis, (0, 1 << 14))
             if not low <= target <= high:
                 raise GoalRefused(
