@@ -120,20 +120,25 @@ class DobotClient(SerialClient):
             if self._serial is None:
                 raise LinkError(f'{name}: port {self.port} is not open')
             data = frame.encode()
+            silent_at = self.silent_at(time.monotonic())
+            attempts = 0
             try:
                 if self._unsettled:
-                    self._settle(name, timeout)
+                    self._settle(name, timeout, silent_at)
                 for attempt in range(self.retries + 1):
+                    if time.monotonic() >= silent_at:
+                        break
                     if attempt:
                         self.retried += 1
                     self.requests += 1
+                    attempts += 1
                     self._serial.reset_input_buffer()
                     self._reader.reset()
                     try:
                         self._serial.write(data)
                     except serial.SerialTimeoutException:
                         continue        # a slow link, not a lost one: retry
-                    reply = self._await_reply(frame, time.monotonic() + timeout)
+                    reply = self._await_reply(frame, min(time.monotonic() + timeout, silent_at))
                     if reply is not None:
                         # an earlier attempt may still be answered: settle before the next
                         self._unsettled = attempt > 0
@@ -143,11 +148,13 @@ class DobotClient(SerialClient):
             except PORT_FAILURES as error:
                 self._close_locked()
                 raise LinkError(f'{name}: link to {self.port} lost: {error}') from error
+        if time.monotonic() >= silent_at:
+            raise DeviceTimeoutError(self.silence_message(name, attempts))
         raise DeviceTimeoutError(
             f'{name}: no valid reply from {self.port} within {timeout:.3f} s '
             f'after {self.retries + 1} attempts')
 
-    def _settle(self, name, timeout):
+    def _settle(self, name, timeout, silent_at=math.inf):
         """
         Wait until the replies to every earlier request have passed (lock held).
 
@@ -157,11 +164,14 @@ class DobotClient(SerialClient):
         settling read can only settle, never answer a request.
         """
         self.settles += 1
-        for _ in range(self.retries + 1):
+        for attempt in range(self.retries + 1):
+            if time.monotonic() >= silent_at:
+                raise DeviceTimeoutError(self.silence_message(f'{name} (settling)', attempt))
             self._serial.reset_input_buffer()
             self._reader.reset()
             self._serial.write(_SETTLE.encode())
-            if self._await_reply(_SETTLE, time.monotonic() + timeout) is not None:
+            if self._await_reply(_SETTLE, min(time.monotonic() + timeout,
+                                              silent_at)) is not None:
                 self._unsettled = False
                 return
         raise DeviceTimeoutError(

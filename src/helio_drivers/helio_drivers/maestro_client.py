@@ -36,21 +36,29 @@ class MaestroClient(SerialClient):
                 if reply_length == 0:
                     self._serial.write(data)
                     return b''
+                silent_at = self.silent_at(time.monotonic())
+                attempts = 0
                 for attempt in range(self.retries + 1):
+                    if time.monotonic() >= silent_at:
+                        break
                     if attempt:
                         self.retried += 1
+                    attempts += 1
                     self._serial.reset_input_buffer()
                     try:
                         self._serial.write(data)
                     except serial.SerialTimeoutException:
                         continue        # a slow link, not a lost one: retry
-                    reply = self._read(reply_length, time.monotonic() + self.timeout)
+                    reply = self._read(reply_length, min(time.monotonic() + self.timeout,
+                                                         silent_at))
                     if len(reply) == reply_length:
                         return reply
                     # Replies carry no channel number: one that comes after its timeout
                     # would be read as the answer to the next query (possibly another
                     # channel's), so it is waited out here and discarded.
-                    self._drain_late_replies()
+                    self._drain_late_replies(until=silent_at)
+                if time.monotonic() >= silent_at:
+                    raise DeviceTimeoutError(self.silence_message(what, attempts))
             except PORT_FAILURES as error:
                 self._close_locked()
                 raise LinkError(f'{what}: link to {self.port} lost: {error}') from error

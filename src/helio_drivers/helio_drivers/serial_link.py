@@ -4,6 +4,7 @@ What both pyserial clients share: errors, opening a port, the link state, reconn
 No rclpy here: the nodes use these to keep the link state and to decide when to retry.
 """
 
+import math
 import os
 import termios
 import threading
@@ -208,6 +209,10 @@ class SerialClient:
         self._lock = threading.Lock()
         self.retried = 0            # requests sent again after a bad or missing reply
         self.drained_bytes = 0      # late input dropped after a timeout or a retry
+        # a request left without a valid reply this long in all (its attempts and the waits
+        # for late replies together) fails at once as silent: DeviceTimeoutError (0: no such
+        # limit, only the attempts' timeouts) [s]
+        self.silence_timeout = 0.0
 
     @property
     def connected(self):
@@ -229,16 +234,25 @@ class SerialClient:
     def _on_open(self):
         """Reset per-link state after the port opened (called with the lock held)."""
 
-    def _drain_late_replies(self):
+    def silent_at(self, started):
+        """Return when a request begun at `started` [monotonic s] counts as silent (or inf)."""
+        return started + self.silence_timeout if self.silence_timeout > 0.0 else math.inf
+
+    def silence_message(self, what, attempts):
+        """Return the DeviceTimeoutError text of a request cut short by `silence_timeout`."""
+        return (f'{what}: no valid reply from {self.port} within the silence limit of '
+                f'{self.silence_timeout:.3f} s ({attempts} attempts of {self.timeout:.3f} s)')
+
+    def _drain_late_replies(self, until=math.inf):
         """
         Read and drop input until the line has been quiet for one reply timeout.
 
         Called (lock held) after a request timed out or was retried: the device may still
         answer an attempt, and that late reply must never be read as the answer to the next
-        request. Bounded by (retries + 2) reply timeouts.
+        request. Bounded by (retries + 2) reply timeouts and by `until` [monotonic s].
         """
         port = self._serial
-        deadline = time.monotonic() + (self.retries + 2) * self.timeout
+        deadline = min(time.monotonic() + (self.retries + 2) * self.timeout, until)
         quiet_since = time.monotonic()
         while True:
             now = time.monotonic()

@@ -143,6 +143,40 @@ def test_no_reply_raises_a_timeout_within_the_configured_time(dobot):
     assert client.get_pose() is not None
 
 
+@pytest.mark.parametrize('device, late', [('dobot', 0.6), ('maestro', 0.4)])
+def test_the_silence_limit_ends_a_request_to_a_hung_device_in_time_whatever_the_attempts(
+        device, late):
+    # Issue 35: 0.5 s a reply (the simulated graph's, for a busy machine) and 3 attempts made
+    # a hung Dobot fail after 1.5 s and a hung Maestro after 3.0 s (each missed reply is
+    # also waited out); `silence_timeout` 1.0 s bounds both. Slow replies still answer: the
+    # Dobot's 0.6 s late reply answers its second attempt (it carries the command's id);
+    # the Maestro's replies carry nothing to match, so a late one is waited out and dropped,
+    # and only replies within the 0.5 s attempt count
+    if device == 'dobot':
+        emulator, client_class, request = DobotEmulator(), DobotClient, DobotClient.get_pose
+    else:
+        emulator, client_class = MaestroEmulator(), MaestroClient
+        request = lambda client: client.get_position(0)      # noqa: E731
+    with emulator:
+        client = client_class(emulator.port_path, timeout=0.5, retries=2)
+        client.silence_timeout = 1.0
+        client.connect()
+        try:
+            emulator.inject(reply_delay_s=late)
+            assert request(client) is not None
+            emulator.clear_faults()
+            emulator.inject(deaf=True)
+            started = time.monotonic()
+            with pytest.raises(DeviceTimeoutError, match='silence limit of 1.000 s'):
+                request(client)
+            elapsed = time.monotonic() - started
+            assert 1.0 <= elapsed < 1.0 + 0.2, elapsed
+            emulator.clear_faults()
+            assert request(client) is not None
+        finally:
+            client.close()
+
+
 def test_unplug_mid_move_fails_fast_and_the_same_path_reopens(dobot):
     emulator, client = dobot
     client.set_ptp_joint_params(proto.PtpJointParams((20.0,) * 4, (100.0,) * 4))
