@@ -33,6 +33,9 @@ import serial
 _SETTLE = proto.ptp_common_params_request()
 
 CARTESIAN_MODES = (proto.PtpMode.MOVJ_XYZ, proto.PtpMode.MOVL_XYZ, proto.PtpMode.JUMP_XYZ)
+# no Dobot Magician reports its end farther from its base [mm] (its reach is 320 mm): a pose
+# farther out is noise that passed the checksum (``DobotClient.possible_pose``)
+POSE_RADIUS_MAX_MM = 1000.0
 
 
 def target_to_protocol(mode, target):
@@ -46,6 +49,11 @@ def target_to_protocol(mode, target):
         return (target[0] * 1000.0, target[1] * 1000.0, target[2] * 1000.0,
                 math.degrees(target[3]))
     raise ValueError(f'mode {mode} is not one of MOVJ_XYZ (1), MOVL_XYZ (2), MOVJ_ANGLE (4)')
+
+
+def _describe_pose(pose):
+    return (f'x, y, z {pose.x:.6g}, {pose.y:.6g}, {pose.z:.6g} mm, joints '
+            f'{", ".join(f"{j:.6g}" for j in pose.joints)} deg')
 
 
 def pose_to_si(pose):
@@ -204,8 +212,26 @@ class DobotClient(SerialClient):
     # ---- typed commands ---------------------------------------------------------------------
 
     def get_pose(self):
-        """Return the current Pose (mm, deg)."""
-        return proto.decode_pose(self.request(proto.get_pose_request()).params)
+        """Return the current Pose (mm, deg); one no Dobot can report is asked for again."""
+        return self.checked(lambda: proto.decode_pose(self.request(proto.get_pose_request())
+                                                      .params),
+                            'GET_POSE', self.possible_pose, _describe_pose)
+
+    @staticmethod
+    def possible_pose(pose):
+        """
+        Tell whether a Dobot can report `pose` (finite, within half a turn and a metre).
+
+        Every joint within half a turn, and the end within a metre of the base (its reach is
+        a third of that). The frame's checksum lets one random frame in 256 through. The
+        Cartesian values are not checked against the arm model: they include the end
+        effector's offset that the firmware is configured with (DobotStudio sets one per
+        tool), unknown here.
+        """
+        if not all(math.isfinite(v) for v in (pose.x, pose.y, pose.z, pose.r, *pose.joints)):
+            return False
+        return (all(abs(j) <= 180.0 for j in pose.joints)
+                and math.hypot(pose.x, pose.y, pose.z) <= POSE_RADIUS_MAX_MM)
 
     def get_alarms(self):
         """Return the active alarm codes."""

@@ -154,8 +154,13 @@ class DobotDriverNode(DeviceActionNode):
             self.create_device_service(Trigger, name, callback)
 
     def read_joints(self):
-        """Return the joint names and j1..j4 [rad]."""
+        """Return the joint names and j1..j4 [rad]; impossible poses are said on dobot/status."""
         _, joints = pose_to_si(self.client.get_pose())
+        dropped = self.client.impossible_replies
+        if dropped:
+            self.setup_notes['replies'] = (
+                f'dropped {dropped} pose replies no Dobot can send (values out of range '
+                'behind a valid checksum): noise on the line?')
         return self.joint_names, joints
 
     def read_alarms(self):

@@ -83,6 +83,7 @@ class DobotEmulator(PtyDevice):
         self._alarms = set()
         self._lost_replies = {}                 # command id -> replies still to lose
         self._missized_replies = {}             # command id -> replies still to mis-size
+        self._forged_replies = {}               # command id -> replies still to forge
         self._settings = {}                     # command id (, address) -> bytes written
         self._home_params = None                # SetHOMEParams (mm, deg), None: home joints
         self._started_at = clock()
@@ -165,6 +166,17 @@ class DobotEmulator(PtyDevice):
         with self._lock:
             self._missized_replies[int(command_id)] = int(count)
 
+    def forge_replies(self, command_id, count=1):
+        """
+        Answer the next `count` frames of `command_id` with random parameter bytes.
+
+        Framed as the device frames them, with a valid checksum: the line noise one frame
+        in 256 of which passes the checksum; only the client's check of the values can
+        catch it.
+        """
+        with self._lock:
+            self._forged_replies[int(command_id)] = int(count)
+
     def handle_input(self, data):
         """Parse frames and return their replies (bytes)."""
         errors_before = self._reader.checksum_errors
@@ -186,6 +198,10 @@ class DobotEmulator(PtyDevice):
             if self._lost_replies.get(cid, 0) > 0:
                 self._lost_replies[cid] -= 1
                 return None
+            if self._forged_replies.get(cid, 0) > 0:
+                self._forged_replies[cid] -= 1
+                noise = bytes(self._random.randrange(256) for _ in reply.params)
+                return proto.Frame(cid, reply.ctrl, noise)
             if self._missized_replies.get(cid, 0) > 0:
                 self._missized_replies[cid] -= 1
                 params = reply.params[:-1] if reply.params else b'\x00'

@@ -6,18 +6,16 @@ framing, so a late reply must never be read as the next one), then wait up to ``
 for the expected number of bytes, retrying up to ``retries`` more times before raising
 ``DeviceTimeoutError``; a reply no Maestro can send (a position outside every channel
 range, a moving state other than 0 or 1, an unused error bit) is asked for again (up to
-``IMPOSSIBLE_REPLIES_MAX`` times). A failing port raises ``LinkError`` and closes the port.
+``serial_link.IMPOSSIBLE_REPLIES_MAX`` times, ``SerialClient.checked``). A failing port
+raises ``LinkError`` and closes the port.
 """
 
 import time
 
 from helio_drivers import maestro_protocol as proto
 from helio_drivers.serial_link import (
-    DeviceError, DeviceTimeoutError, LinkError, PORT_FAILURES, SerialClient)
+    DeviceTimeoutError, LinkError, PORT_FAILURES, SerialClient)
 import serial
-
-
-IMPOSSIBLE_REPLIES_MAX = 5      # replies no Maestro can send, in a row, before a query fails
 
 
 class MaestroClient(SerialClient):
@@ -26,7 +24,6 @@ class MaestroClient(SerialClient):
     def __init__(self, port, baudrate=115200, timeout=0.1, retries=2):
         """Configure; nothing is opened until connect()."""
         super().__init__(port, baudrate, timeout, retries)
-        self.impossible_replies = 0     # replies no Maestro can send (line noise)
 
     def _exchange(self, data, reply_length, what):
         with self._lock:
@@ -89,25 +86,9 @@ class MaestroClient(SerialClient):
                        f'set acceleration ch {channel}')
 
     def _checked_query(self, data, reply_length, what, decode, possible, describe):
-        """
-        Return a query's decoded reply, asking again while it is one no Maestro can send.
-
-        The compact protocol has no checksum: line noise read as a reply is caught only by
-        its value. Such a reply is dropped, counted in ``impossible_replies`` and asked for
-        again, up to IMPOSSIBLE_REPLIES_MAX times in all (noise is not a lost link: a line
-        that garbles one reply in seven, as issue 35's did, fails a query once in 10^4),
-        then ``DeviceError`` (the device answers: it is not silent).
-        """
-        attempts = max(self.retries + 1, IMPOSSIBLE_REPLIES_MAX)
-        for attempt in range(attempts):
-            value = decode(self._exchange(data, reply_length, what))
-            if possible(value):
-                return value
-            self.impossible_replies += 1
-            if attempt < attempts - 1:
-                self.retried += 1
-        raise DeviceError(f'{what}: {attempts} impossible replies in a row from {self.port} '
-                          f'(the last {describe(value)}; line noise?)')
+        """Return a query's decoded reply; impossible ones asked again (``checked``)."""
+        return self.checked(lambda: decode(self._exchange(data, reply_length, what)), what,
+                            possible, describe)
 
     def get_position(self, channel):
         """Return a channel's current pulse [quarter-us] (0 or within PULSE_RANGE_US)."""

@@ -13,6 +13,9 @@ import time
 import serial
 
 
+IMPOSSIBLE_REPLIES_MAX = 5      # replies no device can send, in a row, before a query fails
+
+
 class DeviceError(RuntimeError):
     """A device command failed; the message says which and why."""
 
@@ -213,6 +216,7 @@ class SerialClient:
         # for late replies together) fails at once as silent: DeviceTimeoutError (0: no such
         # limit, only the attempts' timeouts) [s]
         self.silence_timeout = 0.0
+        self.impossible_replies = 0     # well-formed replies no such device can send (noise)
 
     @property
     def connected(self):
@@ -233,6 +237,28 @@ class SerialClient:
 
     def _on_open(self):
         """Reset per-link state after the port opened (called with the lock held)."""
+
+    def checked(self, ask, what, possible, describe):
+        """
+        Return `ask()`'s value, asking again while it is one the device cannot send.
+
+        Line noise can pass as a reply: always on a line without checksums (the Maestro's),
+        rarely through a checksum (the Dobot's: one random frame in 256 passes it). Such a
+        value (`possible(value)` false) is dropped, counted in ``impossible_replies`` and
+        asked for again, up to IMPOSSIBLE_REPLIES_MAX times in all (a line that garbles one
+        reply in seven fails a query once in 10^4), then ``DeviceError`` naming the last one
+        (`describe(value)`): the device answers, it is not silent.
+        """
+        attempts = max(self.retries + 1, IMPOSSIBLE_REPLIES_MAX)
+        for attempt in range(attempts):
+            value = ask()
+            if possible(value):
+                return value
+            self.impossible_replies += 1
+            if attempt < attempts - 1:
+                self.retried += 1
+        raise DeviceError(f'{what}: {attempts} impossible replies in a row from {self.port} '
+                          f'(the last {describe(value)}; line noise?)')
 
     def silent_at(self, started):
         """Return when a request begun at `started` [monotonic s] counts as silent (or inf)."""

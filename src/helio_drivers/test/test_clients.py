@@ -12,8 +12,10 @@ from helio_drivers.dobot_emulator import DobotEmulator
 from helio_drivers.maestro_client import MaestroClient
 from helio_drivers.maestro_emulator import CONFIGURED_SETTINGS as CONFIGURED
 from helio_drivers.maestro_emulator import MaestroEmulator
-from helio_drivers.serial_link import DeviceTimeoutError, LinkError, ReconnectBackoff
+from helio_drivers.serial_link import (
+    DeviceError, DeviceTimeoutError, LinkError, ReconnectBackoff)
 from helio_optics.arm_kinematics import DobotArm, UnreachableError
+import numpy as np
 import pytest
 
 FAST_JOINTS = proto.PtpJointParams((300.0,) * 4, (1000.0,) * 4)
@@ -129,6 +131,25 @@ def test_bad_replies_are_detected_and_retried(dobot, fault):
         assert client.retried == retried + 1
     if fault == 'corrupt_replies':
         assert client.checksum_errors == checksum_errors + 1
+
+
+def test_a_pose_forged_by_noise_past_the_checksum_is_dropped_and_asked_again(dobot):
+    # Issue 35: the checksum lets one random frame in 256 through; the pose's values must
+    # still be ones a Dobot can report, or the reply is dropped, counted and asked again
+    emulator, client = dobot
+    rng = np.random.default_rng(35)
+    forged = [proto.decode_pose(rng.bytes(32)) for _ in range(2000)]
+    passing = sum(map(DobotClient.possible_pose, forged))
+    print(f'\n{passing} of 2000 random poses pass the range check')
+    assert passing <= 0.03 * 2000
+    before = client.impossible_replies
+    emulator.forge_replies(proto.CommandId.GET_POSE, 3)
+    pose = client.get_pose()
+    assert pose.joints == pytest.approx(emulator.joint_positions_deg(), abs=1e-3)
+    assert client.impossible_replies - before == 3
+    emulator.forge_replies(proto.CommandId.GET_POSE, 50)
+    with pytest.raises(DeviceError, match='impossible replies in a row'):
+        client.get_pose()
 
 
 def test_no_reply_raises_a_timeout_within_the_configured_time(dobot):
