@@ -11,6 +11,8 @@ The ``helio`` command: run the graph, paint, record, replay, report.
     helio replay BAG [--rate R] [--delay S] [--exclude TOPIC ...]
     helio report RUN_DIR
     helio udev [--install]                           (the serial devices' udev rule)
+    helio stop [--namespace NS]                      (the emergency stop)
+    helio reset [--namespace NS]                     (release it)
 
 Every sub-command has ``--help``. Exit status: 0 done, 1 failed (one line on stderr, no
 traceback), 2 bad usage, 130 interrupted (Ctrl-C). The options of ``paint`` are generated
@@ -606,7 +608,62 @@ def build_parser(action_type=None):
     udev.add_argument('--install', action='store_true',
                       help='write /etc/udev/rules.d/99-helio.rules and reload udev (root)')
     udev.set_defaults(handler=command_udev)
+
+    for name, engage, text in (
+            ('stop', True, 'EMERGENCY STOP: the drivers stop, the wrist turns the lens off '
+             'the sun, every goal ends and new ones are refused until "helio reset"'),
+            ('reset', False, 'release the emergency stop: goals are taken again')):
+        command = commands.add_parser(name, help=text.split(':')[0].lower(), description=text)
+        command.add_argument('--namespace', default='', help='namespace of the graph')
+        command.add_argument('--timeout', type=float, default=5.0,
+                             help="seconds to wait for the servo driver's service")
+        command.set_defaults(handler=lambda arguments, engage=engage:
+                             command_emergency_stop(arguments, engage))
     return parser
+
+
+def command_emergency_stop(arguments, engage):
+    """
+    Engage (`engage`) or reset the graph's emergency stop through the servo driver's service.
+
+    Without that service (no servo driver), an engage publishes the latched state itself, so
+    that every node running now still stops, and exits 1 saying so.
+    """
+    from helio_optics.node_kit import emergency_stop
+    from helio_optics.node_kit.in_process_graph import GraphTimeout, InProcessGraph
+    from std_msgs.msg import Bool
+    from std_srvs.srv import Trigger
+    name = emergency_stop.SERVICE if engage else emergency_stop.RESET_SERVICE
+    with InProcessGraph(f'helio_{arguments.command}', namespace=arguments.namespace) as graph:
+        client = graph.helper.create_client(Trigger, name)
+        where = graph.helper.resolve_service_name(name)
+        domain = os.environ.get('ROS_DOMAIN_ID', '') or '0 (unset)'
+        try:
+            response = graph.call(client, Trigger.Request(), arguments.timeout)
+        except GraphTimeout:
+            if not engage:
+                raise CommandError(f'no service {where} in ROS_DOMAIN_ID {domain} within '
+                                   f'{arguments.timeout:g} s (is the servo driver running?)')
+            publisher = graph.helper.create_publisher(Bool, emergency_stop.TOPIC,
+                                                      emergency_stop.QOS)
+            publisher.publish(Bool(data=True))
+            acknowledged = publisher.wait_for_all_acked(
+                rclpy_duration(arguments.timeout))
+            listeners = publisher.get_subscription_count()
+            raise CommandError(
+                f'no service {where} in ROS_DOMAIN_ID {domain} within {arguments.timeout:g} s '
+                f'(is the servo driver running?): published '
+                f'{graph.helper.resolve_topic_name(emergency_stop.TOPIC)} = true directly, '
+                f'heard by {listeners} node(s){"" if acknowledged else " (not all confirmed)"}; '
+                'the wrist was NOT turned: check that the focus is off the wood')
+        print(response.message)
+        return EXIT_OK if response.success else EXIT_FAILED
+
+
+def rclpy_duration(seconds):
+    """Return an rclpy Duration of `seconds`."""
+    from rclpy.duration import Duration
+    return Duration(nanoseconds=int(seconds * 1e9))
 
 
 def _interrupt(signum, frame):

@@ -61,11 +61,14 @@ from helio_control.run_journal import goal_to_dict, JournalError, JournalWriter,
 from helio_msgs.action import CalibrateWorld, FocusLens, MoveWrist, PaintPattern, SweepSun
 from helio_msgs.msg import DeviceStatus, FocalCalibration, SpotObservation, SunEstimate
 from helio_msgs.msg import ThermalStats
+from helio_optics.node_kit import emergency_stop
 from helio_optics.node_kit.awaitables import discovered, FirstOf, NextTurn, sleep
 from helio_optics.node_kit.conversions import point_to_array
 from helio_optics.node_kit.deployment import declare_rig, follow_world_calibration
+from helio_optics.node_kit.emergency_stop import EmergencyStopListener
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
+from helio_optics.rig_kinematics import escape_pitch
 import numpy as np
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.clock import Clock, ClockType
@@ -272,6 +275,7 @@ class PainterNode(Node):
         self.sweep = ActionClient(self, SweepSun, 'sweep_sun')
         self.wrist = ActionClient(self, MoveWrist, 'move_wrist')
         self._focus_handles = []
+        self.emergency = EmergencyStopListener(self, self._on_emergency_stop)
         ActionServer(self, PaintPattern, 'paint', self._execute,
                      goal_callback=lambda goal: GoalResponse.ACCEPT,
                      cancel_callback=self._on_cancel)
@@ -350,6 +354,13 @@ class PainterNode(Node):
         beat.stamp = self.get_clock().now().to_msg()
         self.heartbeat_publisher.publish(beat)
 
+    def _on_emergency_stop(self, engaged):
+        """Engaged: end a running painting at once; the drivers take the focus off the wood."""
+        if engaged and self._busy:
+            self._stop_signal = 'the EMERGENCY STOP'
+            self._cancel_requested = True
+            self._wake_heating()
+
     def _on_cancel(self, _goal_handle):
         self._cancel_requested = True
         self._wake_heating()
@@ -420,8 +431,7 @@ class PainterNode(Node):
         # away from the pitch servo's nearer end (the lens axis leaves the sun ray)
         try:
             yaw = float(self.wrist_now.get('lens_yaw', 0.0))
-            pitch = float(self.wrist_now.get('lens_pitch', 0.0))
-            pitch += -self.wrist_turn if pitch > 0.0 else self.wrist_turn
+            pitch = escape_pitch(float(self.wrist_now.get('lens_pitch', 0.0)), self.wrist_turn)
             result = await self._run_action(self.wrist, 'move_wrist',
                                             MoveWrist.Goal(yaw=yaw, pitch=pitch,
                                                            escape=True))
@@ -474,8 +484,9 @@ class PainterNode(Node):
 
     async def _execute(self, goal_handle):
         result = PaintPattern.Result()
-        if self._busy:
-            result.message = 'busy: another painting runs'
+        if self._busy or self.emergency.engaged:
+            result.message = (emergency_stop.refusal('paint goal') if self.emergency.engaged
+                              else 'busy: another painting runs')
             goal_handle.abort()
             return result
         self._busy, self._cancel_requested, self._stop_signal = True, False, ''
@@ -498,8 +509,18 @@ class PainterNode(Node):
                 goal_handle.succeed()
             else:
                 goal_handle.abort()
-        except PaintCanceled:
-            if self._stop_signal and not goal_handle.is_cancel_requested:
+        except (PaintCanceled, PaintFailed) as ended:
+            if self.emergency.engaged:
+                # no retreat: the drivers refuse every move now; they stopped the arm and the
+                # servo driver turned the lens off the sun (node_kit.emergency_stop)
+                self._at_heating = None
+                result.message = 'stopped by the EMERGENCY STOP: the drivers stopped the ' \
+                    'arm and turned the lens off the sun' + (f' ({ended})' if str(ended) else '')
+                goal_handle.abort()
+            elif isinstance(ended, PaintFailed):
+                result.message = f'{ended}; {await self._retreat(str(ended))}'
+                goal_handle.abort()
+            elif self._stop_signal and not goal_handle.is_cancel_requested:
                 # the node stopped (Ctrl-C, SIGTERM), not the client: the goal aborts
                 result.message = (f'stopped by {self._stop_signal}: '
                                   + await self._retreat(self._stop_signal))
@@ -507,9 +528,6 @@ class PainterNode(Node):
             else:
                 result.message = 'canceled: ' + await self._retreat('cancel')
                 goal_handle.canceled()
-        except PaintFailed as failure:
-            result.message = f'{failure}; {await self._retreat(str(failure))}'
-            goal_handle.abort()
         except Exception as error:           # a bug: retreat, then say what happened
             self.get_logger().error(traceback.format_exc())
             result.message = (f'internal error: {type(error).__name__}: {error}; '

@@ -68,6 +68,8 @@ from helio_drivers.serial_link import (
     AUTO_PORT, DeviceError, DeviceTimeoutError, find_port, LinkError, parse_usb_id,
     PortBusyError, ReconnectBackoff)
 from helio_msgs.msg import DeviceStatus
+from helio_optics.node_kit import emergency_stop
+from helio_optics.node_kit.emergency_stop import EmergencyStopListener
 from helio_optics.node_kit.parameters import declare
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
@@ -233,6 +235,11 @@ class DeviceActionNode(Node):
         # Triggered by the device thread once it holds the device: the executor creates the
         # action server and the services (entities are made on the executor's thread).
         self._device_held = self.create_guard_condition(self._advertise)
+        # The emergency stop (issue 30): engaged, the device thread aborts the job, stops the
+        # device and makes the device's own emergency move (``emergency_move``) once; goals
+        # and device services are refused until the reset.
+        self._emergency_done = False
+        self.emergency = EmergencyStopListener(self, lambda _engaged: self._wake.set())
 
     def start_device(self):
         """
@@ -427,6 +434,8 @@ class DeviceActionNode(Node):
         now = time.monotonic()
         if not self.client.connected and self.backoff.due(now):
             self._connect()
+        if self.emergency.engaged != self._emergency_done:
+            self._follow_emergency_stop()
         while self._calls:
             self._calls.pop(0)()
         run = self._run
@@ -445,6 +454,48 @@ class DeviceActionNode(Node):
                 except DeviceError as error:
                     self._poll_failed(error)
             self._publish_status()
+
+    def _follow_emergency_stop(self):
+        """
+        Engaged: abort the job (stopping the device), stop it anyway, make the emergency move.
+
+        Reset: say so. Runs on the device thread; once per change of the state.
+        """
+        engaged = self.emergency.engaged
+        self._emergency_done = engaged
+        if not engaged:
+            self.setup_notes.pop('emergency', None)
+            self.get_logger().warning('emergency stop reset: goals are taken again')
+            self._publish_status()
+            return
+        done = []
+        run = self._run
+        if run is not None:
+            self._stop_and_answer(run, 'abort', f'EMERGENCY STOP: {run.what} aborted')
+            done.append(f'{run.what} aborted')
+        if self.client.connected:
+            try:
+                _, stopped = self.stop_device()
+                done.append(stopped)
+                done.append(self.emergency_move())
+            except DeviceError as error:
+                done.append(f'the {self.spec.label} could NOT be stopped: {error}')
+        else:
+            done.append(f'the {self.spec.label} is not connected ({self._message})')
+        self.setup_notes['emergency'] = (
+            f'EMERGENCY STOP engaged ({"; ".join(d for d in done if d)}); '
+            + emergency_stop.HOW_TO_RESET)
+        self.get_logger().error(self.setup_notes['emergency'])
+        self._publish_status()
+
+    def emergency_move(self):
+        """
+        Make the device's own move of an emergency stop (device thread); return what it did.
+
+        The device stands still when this runs. None by default (the arm stays stopped); the
+        servo driver turns the lens off the sun.
+        """
+        return ''
 
     def _poll_failed(self, error):
         """Handle a failed joint or alarm poll: the running job fails, else the link is lost."""
@@ -587,6 +638,8 @@ class DeviceActionNode(Node):
 
         Refused at once (success False) while another job or goal runs.
         """
+        if self.emergency.engaged:
+            return False, emergency_stop.refusal(what), None
         if not self._claim():
             return False, f'{what} refused: the {self.spec.label} is busy with another job', None
         try:
@@ -641,6 +694,8 @@ class DeviceActionNode(Node):
     async def _execute(self, goal_handle):
         try:
             problem = self.goal_problem(goal_handle.request)
+            if self.emergency.engaged:
+                problem = emergency_stop.refusal(f'{self.spec.action_name} goal')
             if problem:
                 result = self.action_type.Result()
                 result.success, result.message = False, problem

@@ -20,6 +20,13 @@ Node servo_driver: the two wrist servos (lens yaw, lens pitch) on a Pololu Maest
 - ``servo/status`` (helio_msgs/DeviceStatus): link state, reconnect attempts, Maestro errors,
   and what is wrong with the device's set-up (pulses off, limits found).
 
+The emergency stop (``helio_optics.node_kit.emergency_stop``) is this node's: it serves
+``emergency_stop`` and ``emergency_stop_reset`` (std_srvs/Trigger; from the start, with or
+without the Maestro) and publishes the latched ``emergency_stop`` state that every actor of
+the graph follows. Engaged, it aborts a running move, holds the servos and turns the lens
+pitch ``emergency_turn`` off its axis at the escape speed (the focus spreads off the wood),
+and refuses goals until the reset.
+
 The action server exists only while the node has held its device once; a port held by
 another process makes the node refuse to start. A lost port is reopened with exponential
 backoff while goals abort at once; every connection and the shutdown hold both servos at
@@ -35,8 +42,12 @@ from helio_drivers.device_action_node import (
 from helio_drivers.maestro_client import MaestroClient
 from helio_drivers.serial_link import DeviceError
 from helio_msgs.action import MoveWrist
+from helio_optics.node_kit import emergency_stop
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
+from helio_optics.rig_kinematics import escape_pitch
+from std_msgs.msg import Bool
+from std_srvs.srv import Trigger
 
 AXES = ('yaw', 'pitch')
 
@@ -105,11 +116,62 @@ class ServoDriverNode(DeviceActionNode):
                 self, 'escape_acceleration_us_per_s2', 0.0,
                 'Pulse-width acceleration of an escape move [us/s^2] (0 = unlimited: the '
                 "servo's torque limits it).", 0.0, 80000.0)))
+        self.emergency_turn = declare(
+            self, 'emergency_turn', 0.6,
+            'On an emergency stop, turn the lens pitch by this off its axis, away from the '
+            "pitch servo's nearer end, at the escape speed: the focus spreads off the wood "
+            '[rad].', 0.05, 1.5)
+        self.emergency_publisher = self.create_publisher(Bool, emergency_stop.TOPIC,
+                                                         emergency_stop.QOS)
+        self.emergency_publisher.publish(Bool(data=False))
+        self.create_service(Trigger, emergency_stop.SERVICE, self._engage_emergency_stop)
+        self.create_service(Trigger, emergency_stop.RESET_SERVICE, self._reset_emergency_stop)
         self.device_limits_qus = {}     # axis -> (low, high) the Maestro was seen to clamp to
         self.envelopes = {axis: proto.PositionEnvelope(self.tolerance_qus) for axis in AXES}
         self.readings_dropped = 0       # possible values that no move explains (line noise)
         self._limits_sent = {}          # axis -> (speed, acceleration) units last sent
         self.start_device()
+
+    # ---- emergency stop ---------------------------------------------------------------------
+
+    def _engage_emergency_stop(self, _request, response):
+        """Service emergency_stop: publish the latched state; every actor acts on it."""
+        was = self.emergency.engaged
+        self.emergency_publisher.publish(Bool(data=True))
+        response.success = True
+        response.message = (('already engaged' if was else 'EMERGENCY STOP engaged') +
+                            ': the drivers stop, the wrist turns the lens off the sun, every '
+                            'goal ends and new ones are refused until the reset (helio reset)')
+        self.get_logger().error(f'emergency_stop called: {response.message}')
+        return response
+
+    def _reset_emergency_stop(self, _request, response):
+        """Service emergency_stop_reset: release the stop; goals are taken again."""
+        was = self.emergency.engaged
+        self.emergency_publisher.publish(Bool(data=False))
+        response.success = True
+        response.message = ('emergency stop reset: goals are taken again' if was
+                            else 'the emergency stop was not engaged')
+        self.get_logger().warning(f'emergency_stop_reset called: {response.message}')
+        return response
+
+    def emergency_move(self):
+        """Turn the lens pitch ``emergency_turn`` off its axis at the escape speed."""
+        calibration = self.axes['pitch'][0]
+        position = self._read_position('pitch')
+        if not position:
+            return f'{calibration.name} sends no pulses: the lens was not turned'
+        pitch = escape_pitch(calibration.angle(position / 4.0), self.emergency_turn)
+        try:
+            target = calibration.quarter_us(pitch)
+        except ValueError as error:
+            return f'the lens was not turned ({error})'
+        low, high = self.device_limits_qus.get('pitch', (0, 1 << 14))
+        target = min(max(target, low), high)
+        self._send_limits(escape=True)
+        self._set_target('pitch', target)
+        return (f'the lens turned to pitch {calibration.angle(target / 4.0):.2f} rad, off the '
+                'sun')
 
     def _positions_qus(self):
         return {axis: self._read_position(axis) for axis in self.axes}

@@ -144,6 +144,17 @@ class RigParameters:
         return replace(cls(), arm=DobotArmParameters(**arm_values), **rig_values)
 
 
+def escape_pitch(pitch, turn):
+    """
+    Return the lens pitch [rad] turned `turn` [rad] away from the pitch servo's nearer end.
+
+    The wrist's escape when the arm cannot retreat, and the servo driver's on an emergency
+    stop: the lens axis leaves the sun ray by `turn` (coma spreads the focus over the wood
+    at 0.6 rad), whatever the sun, which neither knows for sure then.
+    """
+    return pitch - turn if pitch > 0.0 else pitch + turn
+
+
 def default_rig_file():
     """Return the workspace's config/rig.yaml (see ``config_files``), or None when missing."""
     return config_path('rig.yaml', required=False)
