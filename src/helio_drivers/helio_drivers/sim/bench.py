@@ -32,7 +32,7 @@ moving state and positions, every 20 ms of wall time: ``device_action_node``'s
 servos' moving state (two round trips): the next move starts at once, as the painter starts
 it, so the lens moves all the time however fast the world runs. (An earlier bench ran the
 drivers' whole poll at every turn, hundreds of times a second: the emulators then took 8 ms
-of CPU per simulated second; SIMULATION.md, "Memory traffic".)
+of CPU per simulated second; docs/measurements/simulation-speed-history.md, "Memory traffic".)
 ``sim_node_heating_*`` holds the lens on a dot, ``sim_node_moving_*`` commands the next of
 two dots as soon as the last move ended; CPU is the node process's (``/proc``), and
 ``sim_node_*_rgb_hz`` / ``_thermal_hz`` count the frames received per simulated second.

@@ -175,7 +175,8 @@ class SimWorld:
         ``attach_joint_source``.
         """
         # its 0.3-4 MB arrays, allocated and freed every step and frame, are reused from the
-        # heap, not page-faulted in anew (a tridiagonal product 1.1 -> 0.3 ms, SIMULATION.md)
+        # heap, not page-faulted in anew (a tridiagonal product 1.1 -> 0.3 ms:
+        # docs/measurements/simulation-speed-history.md)
         keep_large_buffers()
         self.settings = settings or SimSettings()
         s = self.settings
