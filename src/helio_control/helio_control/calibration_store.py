@@ -6,7 +6,8 @@ be passed with ``--params-file``) whose parameters hold the values, plus a
 ``calibration_record`` entry: when it was made, by what, and the rig description it was made
 for (``rig_description``: a digest of the rig file's text). A calibration made for another rig
 description (a changed link length, another camera mount) measured a different rig: it is
-refused on load with the reason, never applied.
+refused on load with the reason, never applied. ``list_calibrations`` says, for each file of
+a directory, what it is and whether it would be used (``helio calibrations``).
 """
 
 import datetime
@@ -68,3 +69,35 @@ def load_calibration(directory, name, description):
             f'{record.get("saved_at", "at an unknown time")}), this rig is {description}: the '
             'rig file changed since; calibrate again')
     return values, record
+
+
+DEFAULT_DIRECTORY = '~/.helio/calibration'
+
+
+def list_calibrations(directory, description):
+    """
+    Return one dict per ``*.yaml`` of `directory` (sorted): what each calibration is.
+
+    Keys: ``name``, ``usable`` (it would be read back for the rig description
+    `description`), ``reason`` (why not, '' when usable), and from its record ``made_by``,
+    ``saved_at``, ``rig_description`` and the rest of the record (residuals, notes).
+    """
+    entries = []
+    if not os.path.isdir(directory):
+        return entries
+    for name in sorted(os.listdir(directory)):
+        if not name.endswith('.yaml'):
+            continue
+        entry = {'name': name, 'usable': True, 'reason': ''}
+        try:
+            loaded = load_calibration(directory, name, description)
+            entry.update(loaded[1])
+        except CalibrationRefused as refused:
+            entry.update(usable=False, reason=str(refused))
+            try:
+                with open(os.path.join(directory, name)) as stream:
+                    entry.update(yaml.safe_load(stream)['/**']['ros__parameters'][RECORD])
+            except (OSError, yaml.YAMLError, KeyError, TypeError):
+                pass
+        entries.append(entry)
+    return entries

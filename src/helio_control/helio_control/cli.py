@@ -11,6 +11,7 @@ The ``helio`` command: run the graph, paint, record, replay, report.
     helio replay BAG [--rate R] [--delay S] [--exclude TOPIC ...]
     helio report RUN_DIR
     helio udev [--install]                           (the serial devices' udev rule)
+    helio calibrations [--dir DIR] [--rig FILE]      (what is saved, and for which rig)
     helio stop [--namespace NS]                      (the emergency stop)
     helio reset [--namespace NS]                     (release it)
 
@@ -609,6 +610,16 @@ def build_parser(action_type=None):
                       help='write /etc/udev/rules.d/99-helio.rules and reload udev (root)')
     udev.set_defaults(handler=command_udev)
 
+    calibrations = commands.add_parser(
+        'calibrations', help='list the saved calibrations',
+        description='List the calibration directory: each calibration, when and by what it was '
+        'made, its residuals, and whether it is used for this rig file (one made for another '
+        'rig description is refused by the nodes). Exit 1 when one is refused.')
+    calibrations.add_argument('--dir', help='calibration directory (default '
+                              "~/.helio/calibration, the lens planner's calibration_dir)")
+    calibrations.add_argument('--rig', help="rig file (default: the workspace's config/rig.yaml)")
+    calibrations.set_defaults(handler=command_calibrations)
+
     for name, engage, text in (
             ('stop', True, 'EMERGENCY STOP: the drivers stop, the wrist turns the lens off '
              'the sun, every goal ends and new ones are refused until "helio reset"'),
@@ -620,6 +631,31 @@ def build_parser(action_type=None):
         command.set_defaults(handler=lambda arguments, engage=engage:
                              command_emergency_stop(arguments, engage))
     return parser
+
+
+def command_calibrations(arguments):
+    """List the saved calibrations: what, when, residuals, and whether this rig uses them."""
+    from helio_control.calibration_store import (
+        DEFAULT_DIRECTORY, list_calibrations, rig_description)
+    from helio_optics.node_kit.deployment import rig_file_or_default
+    directory = os.path.expanduser(arguments.dir or DEFAULT_DIRECTORY)
+    rig_file = rig_file_or_default(arguments.rig or '')
+    description = rig_description(rig_file)
+    entries = list_calibrations(directory, description)
+    print(f'{directory} (rig file {rig_file}, rig description {description}):')
+    if not entries:
+        print('  no calibration saved: the painter calibrates robot-world at its first '
+              'painting; calibrate_focus measures the heating distance')
+        return EXIT_OK
+    for entry in entries:
+        extra = ', '.join(f'{key} {value:.4g}' if isinstance(value, float) else
+                          f'{key} {value}' for key, value in entry.items()
+                          if key not in ('name', 'usable', 'reason', 'made_by', 'saved_at',
+                                         'rig_description'))
+        state = 'used' if entry['usable'] else f'REFUSED: {entry["reason"]}'
+        print(f'  {entry["name"]}: saved {entry.get("saved_at", "?")} by '
+              f'{entry.get("made_by", "?")}{"; " + extra if extra else ""}; {state}')
+    return EXIT_OK if all(entry['usable'] for entry in entries) else EXIT_FAILED
 
 
 def command_emergency_stop(arguments, engage):

@@ -1,7 +1,8 @@
 """Calibration files: round trip, the rig description they were made for, bad files."""
 
 from helio_control.calibration_store import (
-    CalibrationRefused, load_calibration, rig_description, save_calibration)
+    CalibrationRefused, list_calibrations, load_calibration, rig_description, save_calibration)
+from helio_control.cli import main
 import pytest
 import yaml
 
@@ -33,3 +34,28 @@ def test_a_file_that_is_not_a_calibration_is_refused_by_name(tmp_path, text):
     (tmp_path / 'focus.yaml').write_text(text)
     with pytest.raises(CalibrationRefused, match='focus.yaml: not a calibration file'):
         load_calibration(str(tmp_path), 'focus.yaml', '0123456789abcdef')
+
+
+def test_helio_calibrations_lists_each_file_and_says_which_this_rig_refuses(tmp_path, capsys):
+    rig = tmp_path / 'rig.yaml'
+    rig.write_text('rig:\n  link_2: 0.135\n')
+    directory = str(tmp_path / 'cal')
+    save_calibration(directory, 'robot_world.yaml', {'rig': {'world_yaw': 0.01}},
+                     rig_description(str(rig)), 'lens_planner', {'residual_position_m': 2e-5})
+    other = tmp_path / 'other_rig.yaml'
+    other.write_text('rig:\n  link_2: 0.136\n')
+    save_calibration(directory, 'focus.yaml', {'heating_distance': 0.083},
+                     rig_description(str(other)), 'lens_planner')
+    (tmp_path / 'cal' / 'notes.txt').write_text('not a calibration')
+    entries = list_calibrations(directory, rig_description(str(rig)))
+    assert [(e['name'], e['usable']) for e in entries] == [
+        ('focus.yaml', False), ('robot_world.yaml', True)]
+    assert 'was made for rig description' in entries[0]['reason']
+    assert entries[1]['residual_position_m'] == 2e-5
+    # the command: one line each, exit 1 because one is refused
+    assert main(['calibrations', '--dir', directory, '--rig', str(rig)]) == 1
+    out = capsys.readouterr().out
+    assert 'robot_world.yaml: saved ' in out and 'residual_position_m 2e-05; used' in out
+    assert 'focus.yaml' in out and 'REFUSED' in out
+    assert main(['calibrations', '--dir', str(tmp_path / 'none'), '--rig', str(rig)]) == 0
+    assert 'no calibration saved' in capsys.readouterr().out
