@@ -21,15 +21,18 @@ Beyond the paper:
   spot) retreats the lens and waits for the sun (the spot seen again in a row of frames, at
   most ``cloud_timeout``), then heats the same dot again with its full target;
 - **fire-safety watchdog**: the lens never rests at the heating distance without fresh thermal
-  data. Thermal statistics older than ``thermal_stale`` (node clock, or ``thermal_stale_wall`` of
-  wall time), a dot held past ``max_heating``, a device fault or alarm (``dobot/status``,
-  ``servo/status``), a cancel, or the node stopping: the lens retreats at once (``focus`` at the
-  retreat distance; if the arm cannot move, the wrist turns the lens off the sun: a ``move_wrist``
-  escape goal, at the servos' own speed). A stale stream then gets ``thermal_back_timeout`` to come
-  back (the dot is heated again from the start, and the result counts it); everything else ends the
-  goal saying why. A window-rule frame without a camera pose is fresh data without a window
-  reading: heat on while the image's N_p is below the target (the window lies in the image), else
-  it counts towards ``thermal_stale``;
+  data. Thermal statistics older than ``thermal_stale`` (node clock, or ``thermal_stale_wall``
+  of wall time), a dot held past ``max_heating``, a device fault or alarm (``dobot/status``,
+  ``servo/status``), a cancel, or the node stopping: the lens retreats at once (``focus`` at
+  the retreat distance; if the arm cannot move, the wrist turns the lens off the sun: a
+  ``move_wrist`` escape goal, at the servos' own speed; a retreat goal not accepted within
+  ``retreat_accept_timeout`` of wall time, as a killed lens planner's never is, goes to the
+  wrist at once, and any goal not accepted within ``goal_accept_timeout`` fails the painting).
+  A stale stream then gets ``thermal_back_timeout`` to come back (the dot is heated again from
+  the start, and the result counts it); everything else ends the goal saying why. A window-rule
+  frame without a camera pose is fresh data without a window reading: heat on while the image's
+  N_p is below the target (the window lies in the image), else it counts towards
+  ``thermal_stale``;
 - **resume**: every finished dot is appended (and flushed) to the run's ``journal.jsonl``;
   the same goal sent again continues an unfinished run at its first unburnt dot, with the
   same plan, none lost and none doubled (``fresh`` starts over; ``start_index`` skips the
@@ -62,7 +65,7 @@ from helio_msgs.action import CalibrateWorld, FocusLens, MoveWrist, PaintPattern
 from helio_msgs.msg import DeviceStatus, FocalCalibration, SpotObservation, SunEstimate
 from helio_msgs.msg import ThermalStats
 from helio_optics.node_kit import emergency_stop
-from helio_optics.node_kit.awaitables import discovered, FirstOf, NextTurn, sleep
+from helio_optics.node_kit.awaitables import discovered, FirstOf, NextTurn, sleep, within
 from helio_optics.node_kit.conversions import point_to_array
 from helio_optics.node_kit.deployment import declare_rig, follow_world_calibration
 from helio_optics.node_kit.emergency_stop import EmergencyStopListener
@@ -213,6 +216,15 @@ class PainterNode(Node):
             'A driver whose joint states stopped this long (wall clock, not counting time in '
             'which the painter itself did not run) is a device fault while heating [s].',
             0.1, 60.0)
+        self.goal_accept_timeout = declare(
+            self, 'goal_accept_timeout', 5.0,
+            'A focus or wrist goal not accepted within this (wall clock) fails the painting, '
+            'which then retreats: a killed server stays discovered for seconds and never '
+            'answers [s].', 0.1, 600.0)
+        self.retreat_accept_timeout = declare(
+            self, 'retreat_accept_timeout', 0.5,
+            'A retreat goal not accepted within this (wall clock) goes to the next way of '
+            'taking the focus off the wood: the lens planner, then the wrist [s].', 0.05, 10.0)
         self.wrist_turn = declare(self, 'wrist_escape_pitch', 0.6,
                                   'If the arm cannot retreat, turn the lens pitch by this to '
                                   'put the focus off the wood [rad].', 0.05, 1.5)
@@ -391,10 +403,28 @@ class PainterNode(Node):
         except TimeoutError as error:
             raise PaintFailed(str(error)) from None
 
-    async def _run_action(self, client, name, goal):
-        """Send a goal and return its result (PaintFailed when refused)."""
-        await self._server(client, name)
-        handle = await client.send_goal_async(goal)
+    async def _run_action(self, client, name, goal, urgent=False):
+        """
+        Send a goal and return its result (PaintFailed when refused).
+
+        Every goal must be accepted within ``goal_accept_timeout`` of wall time (a killed
+        server stays discovered for seconds and never answers; a lens left at the heating
+        distance then goes to ``_retreat``). `urgent` (``_retreat``): no wait for a server
+        that is not there, and ``retreat_accept_timeout`` instead: the retreat then turns to
+        the wrist at once.
+        """
+        if not urgent:
+            await self._server(client, name)
+        elif not client.server_is_ready():
+            raise PaintFailed(f'no {name} server (its node is gone)')
+        # a killed server stays discovered for seconds and never answers: every goal must be
+        # accepted within a bound, or the painting fails (and retreats) instead of waiting
+        limit = self.retreat_accept_timeout if urgent else self.goal_accept_timeout
+        sent = client.send_goal_async(goal)
+        if not await within(self, sent, limit, wall=True):
+            raise PaintFailed(f'{name} did not accept the goal within {limit:g} s (is its node '
+                              'running?)')
+        handle = sent.result()
         if not handle.accepted:
             raise PaintFailed(f'{name} refused the goal')
         self._focus_handles.append(handle)
@@ -403,11 +433,11 @@ class PainterNode(Node):
         finally:
             self._focus_handles.remove(handle)
 
-    async def _focus(self, target, d_lp, travel_d_lp=0.0):
+    async def _focus(self, target, d_lp, travel_d_lp=0.0, urgent=False):
         goal = FocusLens.Goal(d_lp=float(d_lp), travel_d_lp=float(travel_d_lp))
         goal.target.header.frame_id = 'world'
         goal.target.point.x, goal.target.point.y = float(target[0]), float(target[1])
-        result = await self._run_action(self.focus, 'focus', goal)
+        result = await self._run_action(self.focus, 'focus', goal, urgent)
         return result
 
     async def _retreat(self, why):
@@ -420,7 +450,7 @@ class PainterNode(Node):
             failure = arm_fault
         else:
             try:
-                result = await self._focus(target, d_lp + self.retreat_offset)
+                result = await self._focus(target, d_lp + self.retreat_offset, urgent=True)
                 if result.success:
                     self._at_heating = None
                     return f'retreated ({why})'
@@ -434,7 +464,7 @@ class PainterNode(Node):
             pitch = escape_pitch(float(self.wrist_now.get('lens_pitch', 0.0)), self.wrist_turn)
             result = await self._run_action(self.wrist, 'move_wrist',
                                             MoveWrist.Goal(yaw=yaw, pitch=pitch,
-                                                           escape=True))
+                                                           escape=True), urgent=True)
             if result.success:
                 self._at_heating = None
                 return f'the arm could not retreat ({failure}); the wrist turned the lens away'

@@ -94,14 +94,16 @@ async def sleep(node, seconds, wall=False):
         node.destroy_timer(timer)
 
 
-async def within(node, future, seconds):
-    """Return whether `future` is done within `seconds` of the node's clock."""
+async def within(node, future, seconds, wall=False):
+    """Return whether `future` is done within `seconds` of the node's clock (or `wall`)."""
     if future.done():
         return True
-    await clock_running(node)
+    if not wall:
+        await clock_running(node)
     waker = FirstOf()
     future.add_done_callback(lambda _: waker.offer(True))
-    timer = node.create_timer(seconds, lambda: waker.offer(False))
+    clock = Clock(clock_type=ClockType.STEADY_TIME) if wall else None
+    timer = node.create_timer(seconds, lambda: waker.offer(False), clock=clock)
     try:
         await waker
     finally:
