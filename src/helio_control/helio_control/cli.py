@@ -12,6 +12,7 @@ The ``helio`` command: run the graph, paint, record, replay, report.
     helio report RUN_DIR
     helio udev [--install]                           (the serial devices' udev rule)
     helio calibrations [--dir DIR] [--rig FILE]      (what is saved, and for which rig)
+    helio doctor [--namespace NS] [--window S] ...   (the rig's checklist, a fix for each)
     helio stop [--namespace NS]                      (the emergency stop)
     helio reset [--namespace NS]                     (release it)
 
@@ -620,6 +621,32 @@ def build_parser(action_type=None):
     calibrations.add_argument('--rig', help="rig file (default: the workspace's config/rig.yaml)")
     calibrations.set_defaults(handler=command_calibrations)
 
+    doctor = commands.add_parser(
+        'doctor', help='check a running graph: a checklist with a fix for each finding',
+        description='Listen to the running graph for a few seconds and check it: devices '
+        'connected, homed, without alarms; the emergency stop released; each camera at its '
+        'rate with a calibrated camera_info; a thermal read-out that reaches the pyrolysis '
+        'threshold; the marker in view; a site file that is not the sample; the clocks; the '
+        'calibrations made for this rig. Moves nothing. Exit 0 when nothing FAILs, else 1.')
+    doctor.add_argument('--namespace', default='', help='namespace of the graph')
+    doctor.add_argument('--window', type=_finite_float, default=3.0, metavar='SECONDS',
+                        help='how long to listen (default 3)')
+    doctor.add_argument('--calibration-dir', help='calibration directory (default: the lens '
+                        "planner's calibration_dir parameter)")
+    doctor.add_argument('--site', metavar='FILE', help='site file to check (default: the sun '
+                        "estimator's and lens planner's site_file parameters)")
+    doctor.add_argument('--rgb-rate', type=_finite_float, default=5.0, metavar='HZ',
+                        help='expected RGB image rate (default 5, the simulated camera)')
+    doctor.add_argument('--thermal-rate', type=_finite_float, default=8.7, metavar='HZ',
+                        help='expected thermal image rate (default 8.7, a Lepton)')
+    doctor.add_argument('--rate-tolerance', type=_finite_float, default=0.7,
+                        help='a rate below this share of the expected one fails')
+    doctor.add_argument('--discovery-timeout', type=_finite_float, default=10.0,
+                        metavar='SECONDS', help='longest wait for the graph to be discovered '
+                        'before the window starts (default 10)')
+    doctor.add_argument('--json', metavar='PATH', help='also write the findings as JSON')
+    doctor.set_defaults(handler=command_doctor)
+
     for name, engage, text in (
             ('stop', True, 'EMERGENCY STOP: the drivers stop, the wrist turns the lens off '
              'the sun, every goal ends and new ones are refused until "helio reset"'),
@@ -656,6 +683,33 @@ def command_calibrations(arguments):
         print(f'  {entry["name"]}: saved {entry.get("saved_at", "?")} by '
               f'{entry.get("made_by", "?")}{"; " + extra if extra else ""}; {state}')
     return EXIT_OK if all(entry['usable'] for entry in entries) else EXIT_FAILED
+
+
+def command_doctor(arguments):
+    """Gather facts from the running graph, print the checklist; exit 1 when a check fails."""
+    import json
+    from helio_control import doctor
+    from helio_control.bringup import node_environment
+    from helio_control.doctor_probe import gather
+    if arguments.window <= 0.0:
+        raise UsageError(f'--window must be > 0, not {arguments.window:g}')
+    for path, option in ((arguments.site, '--site'),
+                         (arguments.calibration_dir, '--calibration-dir')):
+        if path and not os.path.exists(path):
+            raise CommandError(f'{option} {path} does not exist')
+    os.environ.update(node_environment())        # the camera images' DDS profile
+    facts = gather(arguments.namespace, arguments.window, arguments.calibration_dir,
+                   arguments.site and os.path.abspath(arguments.site),
+                   arguments.discovery_timeout)
+    settings = doctor.Settings(rgb_rate=arguments.rgb_rate,
+                               thermal_rate=arguments.thermal_rate,
+                               rate_tolerance=arguments.rate_tolerance)
+    findings = doctor.run_checks(facts, settings)
+    print(doctor.checklist_text(findings, facts), flush=True)
+    if arguments.json:
+        with open(arguments.json, 'w') as stream:
+            json.dump(doctor.findings_json(findings), stream, indent=1)
+    return EXIT_OK if doctor.passed(findings) else EXIT_FAILED
 
 
 def command_emergency_stop(arguments, engage):
