@@ -1,12 +1,13 @@
 """
 ``helio doctor`` against the simulated rig, as a user runs it (issue 30, item 6).
 
-The simulated graph (the world, both drivers on its emulated ports, the perception nodes,
-the sun estimator and the lens planner, each its own process) starts once for the module,
-with a site file that is not the sample's and a calibration directory holding calibrations
-made for this rig. ``helio doctor`` runs as its own process: on the healthy rig it passes;
-then each fault is injected into the running graph (or given to the doctor as a user would
-point it at a file) and must be reported with its fix:
+The simulated rig starts once for the module: the world (its emulated Dobot and Maestro and
+its cameras) and, on the emulators' ports, ``helio rig`` as a user types it (both drivers,
+the perception nodes, the sun estimator and the lens planner, each its own process, on wall
+time), with a site file that is not the sample's and a calibration directory holding
+calibrations made for this rig. ``helio doctor`` runs as its own process: on the healthy
+rig it passes; then each fault is injected into the running graph (or given to the doctor
+as a user would point it at a file) and must be reported with its fix:
 
 - an uncalibrated camera_info (K = 0, as usb_cam sends without a calibration file): the
   world's camera_info cannot be changed at run time, so this test publishes one on
@@ -19,10 +20,12 @@ point it at a file) and must be reported with its fix:
 - no calibration (``--calibration-dir`` an empty directory).
 """
 
+import signal
 import subprocess
 import sys
 
 from conftest import graph_of_processes, wait_for_devices
+from helio_control.bringup import SIMULATED_DEVICE_REPLY_TIMEOUT, SIMULATED_SILENCE_TIMEOUT
 from helio_control.calibration_store import rig_description, save_calibration
 from helio_drivers import dobot_protocol as proto
 from helio_drivers.dobot_emulator import DobotEmulator
@@ -36,11 +39,12 @@ import pytest
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo
 
 HELIO = [sys.executable, '-m', 'helio_control.cli']
-NODES = ('sim_world', 'dobot_driver', 'servo_driver', 'spot_detector', 'thermal_monitor',
-         'sun_estimator', 'lens_planner')
+RIG_NODES = ('dobot_driver', 'servo_driver', 'spot_detector', 'thermal_monitor',
+             'sun_estimator', 'lens_planner')
 TIMEOUT = 60.0          # [s] wall, for anything of a graph on a loaded 2-core machine
 WINDOW = '3'            # [s] the doctor's listening window
 SPOTS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -127,14 +131,34 @@ def rig(tmp_path_factory):
         {'residual_position_m': 0.0002})
     save_calibration(str(calibrations), 'focus.yaml', {'heating_distance': 0.082},
                      description, 'test_doctor')
-    overrides = {'sim_world': {'flux_rays': 2000, 'flux_rays_moving': 1000},
-                 'sun_estimator': {'site_file': str(site)},
-                 'lens_planner': {'site_file': str(site), 'calibration_dir': str(calibrations)}}
-    with graph_of_processes(tmp, NODES, overrides, client_name='doctor_test') as (group, graph):
-        wait_for_devices(graph, TIMEOUT)
-        doctor = Doctor(group, graph, tmp)
-        doctor.look_at_marker()
-        yield doctor
+    world = {'sim_world': {'flux_rays': 2000, 'flux_rays_moving': 1000}}
+    with graph_of_processes(tmp, ('sim_world',), world, client_name='doctor_test') \
+            as (group, graph), open(tmp / 'helio_rig.log', 'w') as log:
+        ports = tmp / 'ports'
+        graph.collect(Clock, '/clock').wait_for_count(1, TIMEOUT)     # the world stepping
+        assert (ports / 'dobot').exists() and (ports / 'servo').exists()
+        # the rig's nodes as a user starts them: helio rig on the emulators' ports (with the
+        # reply timeouts of the simulated graph: the emulators answer from a loaded process)
+        settings = {'sun_estimator.site_file': site, 'lens_planner.site_file': site,
+                    'lens_planner.calibration_dir': calibrations}
+        for driver in ('dobot_driver', 'servo_driver'):
+            settings.update({f'{driver}.timeout': SIMULATED_DEVICE_REPLY_TIMEOUT,
+                             f'{driver}.silence_timeout': SIMULATED_SILENCE_TIMEOUT})
+        command = HELIO + ['rig', '--dobot-port', str(ports / 'dobot'), '--servo-port',
+                           str(ports / 'servo'), '--log-dir', str(tmp / 'rig_logs'),
+                           '--stop-timeout', '5', '--nodes', *RIG_NODES]
+        for name, value in settings.items():
+            command += ['--set', f'{name}={value}']
+        helio_rig = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
+                                     start_new_session=True)
+        try:
+            wait_for_devices(graph, TIMEOUT)
+            doctor = Doctor(group, graph, tmp)
+            doctor.look_at_marker()
+            yield doctor
+        finally:
+            helio_rig.send_signal(signal.SIGINT)          # Ctrl-C: helio rig stops its nodes
+            helio_rig.wait(timeout=TIMEOUT)
 
 
 def test_the_healthy_simulated_rig_passes(rig):
