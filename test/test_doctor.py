@@ -3,8 +3,8 @@
 
 The simulated rig starts once for the module: the world (its emulated Dobot and Maestro and
 its cameras) and, on the emulators' ports, ``helio rig`` as a user types it (both drivers,
-the perception nodes, the sun estimator and the lens planner, each its own process, on wall
-time), with a site file that is not the sample's and a calibration directory holding
+the perception nodes, the sun estimator and the lens planner, each its own process, on the
+world's clock), with a site file that is not the sample's and a calibration directory holding
 calibrations made for this rig. ``helio doctor`` runs as its own process: on the healthy
 rig it passes; then each fault is injected into the running graph (or given to the doctor
 as a user would point it at a file) and must be reported with its fix:
@@ -138,9 +138,12 @@ def rig(tmp_path_factory):
         graph.collect(Clock, '/clock').wait_for_count(1, TIMEOUT)     # the world stepping
         assert (ports / 'dobot').exists() and (ports / 'servo').exists()
         # the rig's nodes as a user starts them: helio rig on the emulators' ports (with the
-        # reply timeouts of the simulated graph: the emulators answer from a loaded process)
+        # reply timeouts of the simulated graph: the emulators answer from a loaded process),
+        # on the world's clock: on wall time they cannot match its images, stamped in
+        # simulated time, to the joint states (the doctor's time base check says so)
         settings = {'sun_estimator.site_file': site, 'lens_planner.site_file': site,
                     'lens_planner.calibration_dir': calibrations}
+        settings.update({f'{node}.use_sim_time': 'true' for node in RIG_NODES})
         for driver in ('dobot_driver', 'servo_driver'):
             settings.update({f'{driver}.timeout': SIMULATED_DEVICE_REPLY_TIMEOUT,
                              f'{driver}.silence_timeout': SIMULATED_SILENCE_TIMEOUT})
@@ -172,7 +175,7 @@ def test_the_healthy_simulated_rig_passes(rig):
                  'emergency stop', 'rgb camera rate', 'thermal camera rate',
                  'rgb camera_info calibrated', 'thermal camera_info calibrated',
                  'thermal range for charring', 'marker visible', 'site file',
-                 'simulated clock', 'system clock', 'calibration robot_world.yaml',
+                 'simulated clock', 'system clock', 'time base', 'calibration robot_world.yaml',
                  'calibration focus.yaml'):
         assert lines[name][0] == 'OK', lines.get(name)
     assert 'lens_planner.site_file' in lines['site file'][1]            # asked the nodes

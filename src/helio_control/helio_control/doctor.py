@@ -51,6 +51,7 @@ class Settings:
     rate_tolerance: float = 0.7        # measured rate below this share of expected: FAIL
     thermal_floor: float = -40.0       # [degC] a reading below this is a wrong calibration
     timezone_tolerance: float = 3.0    # [h] local offset from longitude/15 before a WARN
+    stamp_tolerance: float = 2.0       # [s] images and joint states stamped further apart fail
 
     def expected_rate(self, kind):
         """Return the expected image rate of camera `kind` (rgb or thermal) [Hz]."""
@@ -164,6 +165,7 @@ class Facts:
     devices: dict = field(default_factory=dict)          # 'dobot'/'servo' -> DeviceFacts
     home_on_connect: bool = None                         # dobot_driver's parameter
     images: dict = field(default_factory=dict)           # 'rgb'/'thermal' -> StreamFacts
+    joint_states: StreamFacts = None                     # the drivers' joint_states
     camera_infos: dict = field(default_factory=dict)     # kind -> [K (9 floats)]
     thermal: list = field(default_factory=list)          # ThermalFacts
     spots: list = field(default_factory=list)            # SpotFacts
@@ -426,6 +428,36 @@ def check_clock(clock, site_longitude=None, settings=None):
     return findings
 
 
+def check_time_base(images, joints, tolerance):
+    """
+    Return the finding of the stamps: camera images and joint states on one clock.
+
+    The spot detector and the thermal monitor look up the arm's joints at each image's
+    stamp (within 0.3 s): images stamped on another clock than the drivers' joint states
+    (a simulated world's cameras with the rig's nodes on wall time, a camera driver on its
+    own clock) leave every camera pose unknown: no hottest point, no N_p window.
+    """
+    name = 'time base'
+    if joints is None or not joints.stamps:
+        return Finding(name, WARN, 'no joint_states heard: image stamps not compared',
+                       'start dobot_driver and servo_driver')
+    newest_joint = max(joints.stamps)
+    offsets = {kind: max(stream.stamps) - newest_joint
+               for kind, stream in sorted(images.items()) if stream is not None and stream.stamps}
+    if not offsets:
+        return Finding(name, WARN, 'no camera image heard: stamps not compared',
+                       'see the camera rates')
+    text = ', '.join(f'{kind} {offset:+.2f} s' for kind, offset in offsets.items())
+    far = {kind: offset for kind, offset in offsets.items() if abs(offset) > tolerance}
+    if far:
+        return Finding(name, FAIL, f'images stamped on another clock than joint_states ({text}'
+                       '): no image can be matched to an arm pose',
+                       'run every node on one clock: with the simulated world, use_sim_time '
+                       'true for all (helio sim does; helio rig --set NODE.use_sim_time=true); '
+                       'on a real rig, camera drivers stamping with the system clock')
+    return Finding(name, OK, f'newest images against the newest joint_states: {text}')
+
+
 def check_calibrations(facts, expected=EXPECTED_CALIBRATIONS):
     """
     Return the findings of the calibration directory: each expected one present and usable.
@@ -496,6 +528,7 @@ def run_checks(facts, settings=None):
             continue
     if facts.clock is not None:
         findings.extend(check_clock(facts.clock, longitude, settings))
+    findings.append(check_time_base(facts.images, facts.joint_states, settings.stamp_tolerance))
     if facts.calibration is not None:
         findings.extend(check_calibrations(facts.calibration))
     return findings

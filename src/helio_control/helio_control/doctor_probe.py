@@ -112,7 +112,7 @@ def gather(namespace='', window=3.0, calibration_dir=None, site_file=None, disco
     from rcl_interfaces.srv import GetParameters
     from rclpy.qos import qos_profile_sensor_data
     from rosgraph_msgs.msg import Clock
-    from sensor_msgs.msg import CameraInfo, Image
+    from sensor_msgs.msg import CameraInfo, Image, JointState
     from std_msgs.msg import Bool
 
     facts = Facts(window=window, namespace=namespace,
@@ -164,6 +164,9 @@ def gather(namespace='', window=3.0, calibration_dir=None, site_file=None, disco
         subscriptions.append(node.create_subscription(
             SpotObservation, 'spot', keep(facts.spots, lambda m: (
                 SpotFacts(m.camera_pose_source, m.reason, m.valid))), qos_profile_sensor_data))
+        joints = facts.joint_states = StreamFacts(node.resolve_topic_name('joint_states'))
+        subscriptions.append(node.create_subscription(JointState, 'joint_states', keep(
+            joints.stamps, lambda m: m.header.stamp.sec + m.header.stamp.nanosec * 1e-9), 50))
         clock_samples = []
         subscriptions.append(node.create_subscription(Clock, '/clock', keep(
             clock_samples, lambda m: (time.monotonic(), m.clock.sec + m.clock.nanosec * 1e-9)),
@@ -181,7 +184,7 @@ def gather(namespace='', window=3.0, calibration_dir=None, site_file=None, disco
                 stream.stamps.clear()
                 stream.arrivals.clear()
             for store in (*facts.camera_infos.values(), facts.thermal, facts.spots,
-                          clock_samples):
+                          clock_samples, joints.stamps):
                 store.clear()
         threading.Event().wait(window)          # the measurement window
         answers = {}

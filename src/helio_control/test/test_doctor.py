@@ -49,6 +49,7 @@ def healthy_facts(tmp_path):
         home_on_connect=True,
         images={'rgb': stream('/rgb/image_raw', 5.0),
                 'thermal': stream('/thermal/image_raw', 8.7)},
+        joint_states=StreamFacts('/joint_states', [100.0 + i / 20.0 for i in range(60)]),
         camera_infos={'rgb': [CALIBRATED_K] * 5, 'thermal': [CALIBRATED_K] * 8},
         thermal=[ThermalFacts(28.0, 180.9, 180.9)] * 5,
         spots=[SpotFacts('marker', 'no spot found')] * 5,
@@ -78,7 +79,7 @@ def test_a_healthy_rig_passes_every_check(tmp_path):
                      'thermal camera_info calibrated', 'thermal range for charring',
                      'marker visible', 'site file', 'simulated clock', 'system clock',
                      'time zone', 'calibration robot_world.yaml', 'calibration focus.yaml',
-                     'emergency stop'):
+                     'emergency stop', 'time base'):
         assert expected in names
 
 
@@ -250,6 +251,17 @@ def test_a_real_rig_has_no_simulated_clock_line(tmp_path):
     facts = healthy_facts(tmp_path)
     facts.clock.samples = []
     assert 'simulated clock' not in {f.name for f in doctor.run_checks(facts)}
+
+
+def test_images_on_another_clock_than_the_joint_states_fail(tmp_path):
+    # the simulated world's cameras (June, simulated time) with the rig's nodes on wall time
+    facts = healthy_facts(tmp_path)
+    facts.joint_states.stamps = [s + 13.75e6 for s in facts.joint_states.stamps]
+    result = finding(doctor.run_checks(facts), 'time base')
+    assert result.level == FAIL and 'another clock' in result.finding
+    assert 'use_sim_time' in result.fix
+    facts.joint_states = None
+    assert finding(doctor.run_checks(facts), 'time base').level == WARN
 
 
 def test_the_engaged_emergency_stop_fails_with_helio_reset(tmp_path):
