@@ -57,11 +57,22 @@ def alive(pid):
 
 
 # ---------------------------------------------------------------------------- the command
-@pytest.mark.parametrize('command', ['sim', 'rig', 'paint', 'record', 'replay', 'report',
-                                     'udev'])
-def test_every_sub_command_has_help(command):
-    done = helio(command, '--help')
-    assert done.returncode == 0 and 'usage: helio' in done.stdout
+def sub_commands():
+    """Return the names of the helio command's sub-commands, as its parser has them."""
+    parser = build_parser(PaintPattern)
+    commands = next(action for action in parser._actions if action.dest == 'command')
+    return sorted(commands.choices)
+
+
+def test_every_sub_command_has_help():
+    names = sub_commands()
+    assert {'sim', 'rig', 'paint', 'stop', 'reset', 'doctor', 'calibrations'} <= set(names)
+    for command in names:
+        done = helio(command, '--help')
+        assert done.returncode == 0 and 'usage: helio' in done.stdout, command
+    # and the list of the command's own help names each one
+    listed = helio('--help').stdout
+    assert all(name in listed for name in names)
 
 
 def test_preview_is_the_preview_command(tmp_path):

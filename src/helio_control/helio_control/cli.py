@@ -235,7 +235,7 @@ def _supervise(arguments, graph, describe):
 def command_preview(arguments):
     """Run the preview command (helio_control.preview) with the remaining arguments."""
     from helio_control import preview
-    return preview.main(arguments.preview_arguments)
+    return preview.main(arguments.preview_arguments, prog='helio preview')
 
 
 def _run_node_in_process(node_class, parameters, namespace):
@@ -780,7 +780,13 @@ def main(args=None):
     except ImportError:
         PaintPattern = None     # noqa: N806 - paint then explains
     parser = build_parser(PaintPattern)
-    arguments = parser.parse_args(args)       # exits 2 on bad usage
+    # exits 2 on bad usage; `preview` hands everything on to its own parser, its leading
+    # options included (argparse's REMAINDER leaves those out: "helio preview --help")
+    arguments, unknown = parser.parse_known_args(args)
+    if arguments.command == 'preview':
+        arguments.preview_arguments = unknown + arguments.preview_arguments
+    elif unknown:
+        parser.error(f'unrecognized arguments: {" ".join(unknown)}')
     _stop_signals_interrupt()
     try:
         if arguments.command == 'paint' and PaintPattern is None:

@@ -156,10 +156,10 @@ def write_preview(plan, picture, directory):
     return png, path
 
 
-def build_parser():
-    """Return the argparse parser of the preview command."""
+def build_parser(prog='python -m helio_control.preview'):
+    """Return the argparse parser of the preview command (`prog`: how it was called)."""
     parser = argparse.ArgumentParser(
-        prog='python -m helio_control.preview',
+        prog=prog,
         description='Plan the dots of a picture (paper Sec. IV-C, Eq 17) and write '
                     'preview.png and plan.json.')
     parser.add_argument('picture', help='picture file (PNG, JPEG, BMP, TIFF, ...) or '
@@ -193,9 +193,9 @@ OPTION_NAMES = ('canvas_size', 'dot_radius', 'offset_x', 'offset_y', 'n_p_target
                 'solver_budget_s', 'sun_elevation_deg', 'sun_azimuth_deg')
 
 
-def main(args=None):
+def main(args=None, prog='python -m helio_control.preview'):
     """Run the preview command; return the exit status (0, 1 or 2)."""
-    parser = build_parser()
+    parser = build_parser(prog)
     arguments = parser.parse_args(args)
     overrides = {name: getattr(arguments, name) for name in OPTION_NAMES}
     try:
