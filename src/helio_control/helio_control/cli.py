@@ -14,6 +14,7 @@ The ``helio`` command: run the graph, paint, record, replay, report.
     helio calibrations [--dir DIR] [--rig FILE]      (what is saved, and for which rig)
     helio doctor [--namespace NS] [--window S] ...   (the rig's checklist, a fix for each)
     helio stop [--namespace NS]                      (the emergency stop)
+    helio sky [--date D] [--heading DEG] [--site FILE] [options]   (when the sun serves)
     helio reset [--namespace NS]                     (release it)
 
 Every sub-command has ``--help``. Exit status: 0 done, 1 failed (one line on stderr, no
@@ -657,7 +658,146 @@ def build_parser(action_type=None):
                              help="seconds to wait for the servo driver's service")
         command.set_defaults(handler=lambda arguments, engage=engage:
                              command_emergency_stop(arguments, engage))
+    add_sky_parser(commands)
     return parser
+
+
+def command_sky(arguments):
+    """Print when the sun serves the canvas on a day, and the heading with the most hours."""
+    import json
+    import time
+    import zoneinfo
+    from helio_control import sky
+    from helio_control.plan import load_plan_options, PlanOptionsError
+    from helio_optics.ephemeris import load_site
+    from helio_optics.node_kit.deployment import deployment_file_or_default
+    from helio_optics.node_kit.deployment import rig_file_or_default
+    from helio_optics.rig_kinematics import load_rig_parameters, Rig
+    started = time.perf_counter()
+    try:
+        site_file = deployment_file_or_default(arguments.site or '', 'site.yaml', '--site')
+        site = load_site(site_file)
+        rig = Rig(load_rig_parameters(rig_file_or_default(arguments.rig or '')))
+        options = load_plan_options(arguments.picture_config, **{
+            name: getattr(arguments, name) for name in
+            ('canvas_size', 'offset_x', 'offset_y', 'd_lp', 'retreat')})
+        options.validate()
+        settings = sky.SkySettings.from_plan_options(
+            options, min_elevation_deg=arguments.min_elevation,
+            need_marker=arguments.marker_in_view, camera_width=arguments.camera_size[0],
+            camera_height=arguments.camera_size[1], camera_fov_deg=arguments.camera_fov)
+    except (OSError, ValueError, PlanOptionsError) as error:
+        raise CommandError(str(error)) from None
+    if arguments.timezone:
+        try:
+            tz = zoneinfo.ZoneInfo(arguments.timezone)
+        except (zoneinfo.ZoneInfoNotFoundError, ValueError):
+            raise CommandError(f'unknown time zone {arguments.timezone!r} (an IANA name such '
+                               'as Europe/Berlin)') from None
+        tz_note = f' ({arguments.timezone})'
+    elif arguments.utc_offset is not None:
+        tz = datetime.timezone(datetime.timedelta(hours=arguments.utc_offset))
+        tz_note = ''
+    else:
+        tz = sky.default_timezone(site)
+        tz_note = (" (the site's longitude, no daylight saving: --timezone NAME or "
+                   '--utc-offset H for the clock on your wall)')
+    date = arguments.date or datetime.datetime.now(tz).date()
+    model = sky.SkyModel(rig, settings)
+    headings = [k * arguments.heading_step for k in
+                range(int(math.ceil(360.0 / arguments.heading_step - 1e-9)))]
+    scan = sky.heading_scan(model, site, date, tz, headings, arguments.step * 60.0)
+    best = sky.best_heading(scan, prefer=arguments.heading)
+    heading = best[0] if arguments.heading is None else arguments.heading
+    day = sky.sky_day(model, site, date, tz, heading, arguments.step * 60.0)
+    lines = sky.report_lines(day, scan, best, settings, site_file, tz_note)
+    if arguments.heading is None:
+        lines.insert(1, f'no --heading given: the table is for the best heading, '
+                        f'{heading:.0f} deg')
+    print('\n'.join(lines))
+    run_time = time.perf_counter() - started
+    print(f'(computed in {run_time:.1f} s)')
+    if arguments.json:
+        with open(arguments.json, 'w') as stream:
+            json.dump(sky.report_dict(day, scan, best, settings, site_file, run_time), stream,
+                      indent=1)
+    if not day.hours:
+        reasons = [sample.verdict.reason for sample in day.samples]
+        common = max(set(reasons), key=reasons.count) if reasons else 'the sun does not rise'
+        other = (f'heading {best[0]:.0f} deg would give {best[1]:.1f} h' if best[1] else
+                 f'no heading in steps of {arguments.heading_step:g} deg does')
+        raise CommandError(f'the sun does not serve this canvas on {date.isoformat()} at '
+                           f'heading {heading:.0f} deg (mostly: {common}); {other}')
+    return EXIT_OK
+
+
+def _positive_float(text):
+    value = _finite_float(text)
+    if value <= 0.0:
+        raise argparse.ArgumentTypeError(f'must be > 0, not {text}')
+    return value
+
+
+def _date(text):
+    try:
+        return datetime.date.fromisoformat(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'a date is YYYY-MM-DD, not {text!r}') from None
+
+
+def _size(text):
+    try:
+        width, height = (int(v) for v in text.lower().split('x'))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'a size is WIDTHxHEIGHT in pixels, not {text!r}') \
+            from None
+    if width < 1 or height < 1:
+        raise argparse.ArgumentTypeError(f'a size must be positive, not {text!r}')
+    return width, height
+
+
+def add_sky_parser(commands):
+    """Add the ``sky`` sub-command to the sub-parsers `commands`."""
+    sky = commands.add_parser(
+        'sky', help='when the sun serves the canvas on a day, and the best heading',
+        description='For the site, a date and the rig heading: the hours in which every canvas '
+        'dot is within reach (Eqs 14-15, the rig file) and the sun sweep can estimate the sun '
+        '(its lowest sun, the camera sees the spot), the windows, and the heading with the '
+        'most hours. Exit 1 when the sun never serves the canvas at that heading.')
+    sky.add_argument('--date', type=_date, help='local date YYYY-MM-DD (default: today)')
+    sky.add_argument('--heading', type=_finite_float, metavar='DEG',
+                     help="compass azimuth of the robot's x axis, clockwise from north (the "
+                     "painter's refusal names the one its sun estimate implies; default: the "
+                     'best heading)')
+    sky.add_argument('--site', help="site file (default: the workspace's config/site.yaml)")
+    sky.add_argument('--rig', help="rig file (default: the workspace's config/rig.yaml)")
+    sky.add_argument('--picture-config', help='picture options file (default: '
+                     'config/picture.yaml): canvas, d_lp, retreat')
+    for name, what in (('canvas-size', 'canvas side l_w'), ('offset-x', 'canvas offset d_x'),
+                       ('offset-y', 'canvas offset d_y'), ('d-lp', 'heating distance d_lp'),
+                       ('retreat', 'retreat delta d_lp')):
+        sky.add_argument(f'--{name}', type=_finite_float, metavar='M', help=f'{what} [m]')
+    zone = sky.add_mutually_exclusive_group()
+    zone.add_argument('--timezone', metavar='NAME', help='IANA time zone of the table, e.g. '
+                      "Europe/Berlin (default: the site's longitude, 15 deg an hour)")
+    zone.add_argument('--utc-offset', type=_finite_float, metavar='HOURS',
+                      help='fixed UTC offset of the table, e.g. 2')
+    sky.add_argument('--step', type=_positive_float, default=10.0, metavar='MIN',
+                     help='minutes between samples (default 10)')
+    sky.add_argument('--heading-step', type=_positive_float, default=15.0, metavar='DEG',
+                     help='step of the heading scan (default 15)')
+    sky.add_argument('--min-elevation', type=_finite_float, default=30.0, metavar='DEG',
+                     help='lowest sun the sweep estimates (default 30: the simulated sweep '
+                     'estimated 31 deg, not 26.5)')
+    sky.add_argument('--marker-in-view', action='store_true',
+                     help='the sweep must see the marker too (a rig without a robot-world '
+                     'calibration)')
+    sky.add_argument('--camera-size', type=_size, default=(640, 480), metavar='WxH',
+                     help='RGB camera image size (default 640x480)')
+    sky.add_argument('--camera-fov', type=_finite_float, default=70.0, metavar='DEG',
+                     help='RGB camera horizontal field of view (default 70)')
+    sky.add_argument('--json', metavar='PATH', help='also write the table as JSON')
+    sky.set_defaults(handler=command_sky)
 
 
 def command_calibrations(arguments):

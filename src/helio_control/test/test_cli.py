@@ -1,4 +1,6 @@
-"""The helio command's pure parts: goal options, the progress line, the Dobot's port."""
+"""The helio command's pure parts: goal options, the progress line, the Dobot's port, sky."""
+
+import json
 
 from helio_control.cli import build_goal, build_parser, CommandError, find_dobot_port
 from helio_control.cli import goal_options, ProgressBar
@@ -82,3 +84,39 @@ def test_into_a_file_the_progress_is_written_once_per_dot_and_phase():
             feedback=PaintPattern.Feedback(index=index, total=2, phase=phase)))
     lines = stream.getvalue().splitlines()
     assert len(lines) == 3 and 'heating' in lines[1] and lines[2].startswith('[' + '#' * 15)
+
+
+def test_sky_takes_its_options():
+    arguments = build_parser(PaintPattern).parse_args(
+        ['sky', '--date', '2026-06-21', '--heading', '200', '--canvas-size', '0.06',
+         '--utc-offset', '2', '--camera-size', '1280x720', '--marker-in-view', '--step', '5'])
+    assert arguments.date.isoformat() == '2026-06-21' and arguments.heading == 200.0
+    assert arguments.canvas_size == 0.06 and arguments.utc_offset == 2.0
+    assert arguments.camera_size == (1280, 720) and arguments.marker_in_view
+    assert arguments.step == 5.0 and arguments.heading_step == 15.0
+    for bad in (['--date', '21.6.2026'], ['--step', '0'], ['--camera-size', '640'],
+                ['--timezone', 'Europe/Berlin', '--utc-offset', '2']):
+        with pytest.raises(SystemExit):
+            build_parser(PaintPattern).parse_args(['sky'] + bad)
+
+
+def test_sky_prints_the_hours_and_fails_in_one_line_when_the_sun_never_serves(capsys, tmp_path):
+    # the default site (the simulated world's, Munich) at the simulated world's heading
+    common = ['sky', '--date', '2026-06-21', '--heading', '200', '--timezone', 'Europe/Berlin',
+              '--step', '30', '--heading-step', '90']
+    arguments = build_parser(PaintPattern).parse_args(common + ['--json',
+                                                                str(tmp_path / 'sky.json')])
+    assert arguments.handler(arguments) == 0
+    out = capsys.readouterr().out
+    assert 'times CEST (Europe/Berlin)' in out
+    assert 'served at heading 200 deg: ' in out and 'best heading ' in out
+    with open(tmp_path / 'sky.json') as stream:
+        written = json.load(stream)
+    assert written['hours'] > 0 and written['heading_deg'] == 200.0
+    assert [entry['heading_deg'] for entry in written['scan']] == [0.0, 90.0, 180.0, 270.0]
+    # Munich's sun never stands 70 deg up: no sweep, the canvas is never served
+    arguments = build_parser(PaintPattern).parse_args(common + ['--min-elevation', '70'])
+    with pytest.raises(CommandError, match='does not serve this canvas on 2026-06-21 at '
+                       r'heading 200 deg \(mostly: the sun stands .* below the lowest the '
+                       'sweep estimates'):
+        arguments.handler(arguments)
