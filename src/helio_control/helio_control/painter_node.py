@@ -39,7 +39,13 @@ Beyond the paper:
   dots before it);
 - **dry run**: the whole painting with the lens at the retreat distance: reach and timing
   without burning;
-- **tones**: each dot's own N_p target (the plan's, Fig. 8d).
+- **tones**: each dot's own N_p target (the plan's, Fig. 8d);
+- **the sky** (``helio_control.sky``, ``helio sky``): a goal the sun cannot serve is refused
+  before its first dot: without a sun estimate, a sun lower than the sweep estimates
+  (``sky.min_sweep_elevation_deg``, at the ``site_file``'s site: before the sweep); with
+  one, none of the goal's points (its dots, or a grid over its canvas) within reach of it.
+  The reason names ``helio sky`` (with the robot heading the estimate implies) and when the
+  sun serves next at the site.
 
 The run directory (``run_dir`` of the goal, else ``runs_dir``/<UTC time>) holds
 ``plan.json``, ``journal.jsonl`` (``helio_control.run_journal``) and ``resume.json``.
@@ -55,6 +61,7 @@ import time
 import traceback
 
 from geometry_msgs.msg import PointStamped
+from helio_control import sky
 from helio_control.dot_cycle import CycleSettings, Decision, DotCycle
 from helio_control.driver_silence import DriverSilence
 from helio_control.picture_input import picture_from_image_msg, PictureError
@@ -66,8 +73,9 @@ from helio_msgs.msg import DeviceStatus, FocalCalibration, SpotObservation, SunE
 from helio_msgs.msg import ThermalStats
 from helio_optics.node_kit import emergency_stop
 from helio_optics.node_kit.awaitables import discovered, FirstOf, NextTurn, sleep, within
-from helio_optics.node_kit.conversions import point_to_array
-from helio_optics.node_kit.deployment import declare_rig, follow_world_calibration
+from helio_optics.node_kit.conversions import point_to_array, stamp_to_seconds
+from helio_optics.node_kit.deployment import declare_rig, declare_site
+from helio_optics.node_kit.deployment import follow_world_calibration
 from helio_optics.node_kit.emergency_stop import EmergencyStopListener
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
@@ -153,6 +161,16 @@ class PainterNode(Node):
         super().__init__('painter', **kwargs)
         self.rig, _ = declare_rig(self)
         follow_world_calibration(self, self.rig)
+        self.site, _ = declare_site(self)
+        self.sky_min_elevation = declare(
+            self, 'sky.min_sweep_elevation_deg', 30.0,
+            'Without a sun estimate, a goal is refused while the sun stands lower than this '
+            'at the site (the simulated sweep estimated a 31 deg sun, not a 26.5 deg one; '
+            'helio sky uses the same figure) [deg].', 0.0, 89.0)
+        self.sky_spacing = declare(
+            self, 'sky.reach_spacing', 0.01,
+            "Spacing of the grid over a picture goal's canvas that must have a point within "
+            'reach of the sun estimate, or the goal is refused [m].', 0.001, 0.1)
         self.heating_distance = declare(
             self, 'heating_distance', 0.082,
             'd_lp of a dot until a focal calibration arrives on calibration/focus (paper: '
@@ -609,6 +627,24 @@ class PainterNode(Node):
             self.sun = sweep.estimate
         self._check()
 
+    def _refuse_what_the_sun_cannot_serve(self, goal):
+        """Raise PaintFailed when the sun cannot serve `goal` now (see the module: the sky)."""
+        now = datetime.datetime.fromtimestamp(self._now(), datetime.timezone.utc)
+        if self.sun is None:
+            refusal = sky.sweep_refusal(self.site, now, self.sky_min_elevation)
+        else:
+            options = options_from_goal(goal)
+            points = [[p.x, p.y] for p in goal.points] if goal.points else sky.canvas_points(
+                options.offset_x, options.offset_y, options.canvas_size, self.sky_spacing)
+            estimated = stamp_to_seconds(self.sun.header.stamp)
+            refusal = sky.reach_refusal(
+                self.rig, points, point_to_array(self.sun.direction), self.heating_distance,
+                self.retreat_offset, self.site, now, self.sky_min_elevation,
+                ray_time=datetime.datetime.fromtimestamp(estimated, datetime.timezone.utc)
+                if estimated > 0.0 else None)
+        if refusal is not None:
+            raise PaintFailed(f'refused: {refusal}')
+
     def _make_plan(self, goal):
         try:
             options = options_from_goal(goal)
@@ -647,7 +683,9 @@ class PainterNode(Node):
         except PlanOptionsError as error:
             raise PaintFailed(f'bad goal: {error}') from None
         key = goal_key(goal)
+        self._refuse_what_the_sun_cannot_serve(goal)      # no sweep for a sun too low
         await self._prepare(goal_handle, feedback)
+        self._refuse_what_the_sun_cannot_serve(goal)      # nor a canvas out of its reach
         resumed = None if goal.fresh else unfinished_run(self.runs_dir, key)
         if resumed is not None:
             try:

@@ -729,22 +729,25 @@ def sweep_refusal(site, now, min_elevation_deg, step=600.0, horizon=48 * 3600.0)
                       horizon)
     when = (f'at this site it stands that high next at {_at(later, now)}' if later else
             f'at this site it does not within {horizon / 3600.0:.0f} h')
-    return Refusal(f'the sun cannot serve a painting now: it stands {elevation:.1f} deg up and '
-                   f'the sun sweep needs {min_elevation_deg:g} deg; {when}; "helio sky" shows '
-                   'the hours the sun serves the canvas', next_time=later)
+    where = (f'it stands {elevation:.1f} deg up' if elevation >= 0.0 else
+             f'it stands {-elevation:.1f} deg below the horizon')
+    return Refusal(f'the sun cannot serve a painting now: {where} and the sun sweep needs '
+                   f'{min_elevation_deg:g} deg; {when}; "helio sky" shows the hours the sun '
+                   'serves the canvas', next_time=later)
 
 
 def reach_refusal(rig, points, sun_ray, d_lp, retreat, site=None, now=None,
-                  min_elevation_deg=0.0, step=600.0, horizon=48 * 3600.0):
+                  min_elevation_deg=0.0, step=600.0, horizon=48 * 3600.0, ray_time=None):
     """
     Return a Refusal when the sun reaches none of `points` now, else None.
 
     `points` are world (x, y) [m] (the goal's dots, or a grid over its canvas), `sun_ray`
-    the sun estimate's s0 (robot frame), judged by ``dot_layout.check_reach`` (Eqs 14-15,
-    the heating and the retreat pose). With the `site` and `now` (UTC) the robot heading
-    follows from the estimate and the ephemeris (``heading_from_ray``): the Refusal names it
-    for ``helio sky --heading`` and says when every point is within reach next with the sun
-    at least `min_elevation_deg` up (to the `step`, within the `horizon` [s]).
+    the sun estimate's s0 (robot frame) at `ray_time` (UTC, default `now`), judged by
+    ``dot_layout.check_reach`` (Eqs 14-15, the heating and the retreat pose). With the
+    `site` and `now` (UTC) the robot heading follows from the estimate and the ephemeris
+    (``heading_from_ray``): the Refusal names it for ``helio sky --heading`` and says when
+    every point is within reach next with the sun at least `min_elevation_deg` up (to the
+    `step`, within the `horizon` [s]).
     """
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     result = check_reach(points, rig, sun_ray, d_lp, retreat)
@@ -758,7 +761,7 @@ def reach_refusal(rig, points, sun_ray, d_lp, retreat, site=None, now=None,
             f'axis ({result.reasons[0]})')
     if site is None or now is None:
         return Refusal(text + '; "helio sky" shows the hours the sun serves it')
-    heading = heading_from_ray(ray, sun_position(site, now))
+    heading = heading_from_ray(ray, sun_position(site, ray_time or now))
     minimum = math.radians(min_elevation_deg)
 
     def served(position):
