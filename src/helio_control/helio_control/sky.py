@@ -785,7 +785,8 @@ def _local(when, tz):
 def _window_text(window, step, tz):
     first, last = window
     hours = ((last - first).total_seconds() + step) / 3600.0
-    return f'{_local(first, tz)}-{_local(last, tz)} ({hours:.1f} h)'
+    span = _local(first, tz) if first == last else f'{_local(first, tz)}-{_local(last, tz)}'
+    return f'{span} ({hours:.1f} h)'
 
 
 def _unserved_runs(day):
