@@ -103,6 +103,10 @@ def test_paint_options_are_the_goal_fields_one_to_one():
     (['rig', '--dobot-port', '/dev/nonexistent0', '--servo-port', '/dev/nonexistent1'], 1,
      'does not exist'),
     (['report', '/nonexistent/run'], 1, 'no run directory'),
+    (['sky', '--date', '2026-06-21', '--min-elevation', '70', '--step', '60',
+      '--heading-step', '120'], 1, 'does not serve this canvas on 2026-06-21'),
+    (['sky', '--site', '/nonexistent/site.yaml'], 1, '/nonexistent/site.yaml'),
+    (['sky', '--date', '2026-13-01'], 2, 'a date is YYYY-MM-DD'),
 ])
 def test_bad_input_exits_non_zero_with_one_line(tmp_path, arguments, status, message):
     done = helio(*arguments, cwd=str(tmp_path))
@@ -110,6 +114,20 @@ def test_bad_input_exits_non_zero_with_one_line(tmp_path, arguments, status, mes
     assert message in done.stderr
     assert 'Traceback' not in done.stderr
     assert len([line for line in done.stderr.splitlines() if 'error' in line]) == 1
+
+
+def test_sky_prints_the_hours_of_the_day_and_writes_them_as_json(tmp_path):
+    # issue 30: the default site (the simulated world's) at the simulated world's heading
+    done = helio('sky', '--date', '2026-06-21', '--heading', '200', '--timezone',
+                 'Europe/Berlin', '--heading-step', '45', '--json', str(tmp_path / 'sky.json'))
+    assert done.returncode == 0, done.stderr
+    assert 'served at heading 200 deg: ' in done.stdout and 'best heading' in done.stdout
+    with open(tmp_path / 'sky.json') as stream:
+        day = json.load(stream)
+    served = [sample for sample in day['samples'] if sample['served']]
+    assert served and all(sample['reach_share'] == 1.0 and sample['sweep'] == 'yes'
+                          and sample['elevation_deg'] >= 30.0 for sample in served)
+    assert day['hours'] == pytest.approx(len(served) * day['step_s'] / 3600.0)
 
 
 def test_paint_with_no_graph_reachable_says_so_in_one_line_and_starts_no_simulation(tmp_path):

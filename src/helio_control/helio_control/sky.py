@@ -759,7 +759,8 @@ def reach_refusal(rig, points, sun_ray, d_lp, retreat, site=None, now=None,
     text = (f'the sun cannot serve this canvas now: none of its {len(points)} points is within '
             f'reach of the sun {elevation:.1f} deg up, {towards:.0f} deg from the robot x '
             f'axis ({result.reasons[0]})')
-    if site is None or now is None:
+    if site is None or now is None or math.hypot(ray[0], ray[1]) < 1e-9:
+        # no site, or a sun at the zenith: the heading cannot be told
         return Refusal(text + '; "helio sky" shows the hours the sun serves it')
     heading = heading_from_ray(ray, sun_position(site, ray_time or now))
     minimum = math.radians(min_elevation_deg)

@@ -233,3 +233,11 @@ def test_reports_say_the_windows_and_the_best_heading(rig):
     data = sky.report_dict(day, scan, best, settings)
     assert data['hours'] == day.hours and len(data['samples']) == len(day.samples)
     assert data['windows'] and data['windows'][0]['start'] == day.windows[0][0].isoformat()
+
+
+def test_a_sun_at_the_zenith_is_refused_without_a_heading(rig):
+    now = datetime.datetime(2026, 6, 21, 12, 0, tzinfo=UTC)
+    far = [(0.6, 0.6)]                     # half a metre beyond the arm's reach
+    refusal = sky.reach_refusal(rig, far, [0.0, 0.0, -1.0], 0.082, 0.03, SITE, now)
+    assert refusal.heading_deg is None and refusal.next_time is None
+    assert "beyond the arm's reach" in str(refusal) and 'helio sky' in str(refusal)
