@@ -750,7 +750,9 @@ def reach_refusal(rig, points, sun_ray, d_lp, retreat, site=None, now=None,
     `step`, within the `horizon` [s]).
     """
     points = np.asarray(points, dtype=float).reshape(-1, 2)
-    result = check_reach(points, rig, sun_ray, d_lp, retreat)
+    if np.any(reach_mask(rig, points, sun_ray, d_lp, retreat)):
+        return None
+    result = check_reach(points, rig, sun_ray, d_lp, retreat)    # the rig model confirms
     if np.any(result.reachable):
         return None
     ray = np.asarray(sun_ray, dtype=float) / np.linalg.norm(sun_ray)
