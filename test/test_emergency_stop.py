@@ -17,7 +17,8 @@ import sys
 from conftest import graph_of_processes
 from helio_msgs.action import MoveArm, MoveWrist, PaintPattern
 from std_srvs.srv import Trigger
-from test_painter_safety import dots_along, EVENT_PACE, NODES, Rig
+from test_painter_safety import dots_along, NODES, one_graph_overrides, painting_interrupted
+from test_painter_safety import Rig
 
 EMERGENCY_BOUND = 0.3      # issue 30: focus off the wood within this [s of sim time]
 ANSWER_TIMEOUT = 60.0      # [s] wall, a loaded machine
@@ -25,27 +26,20 @@ HELIO = [sys.executable, '-m', 'helio_control.cli']
 
 
 def test_the_emergency_stop_takes_the_focus_off_and_refuses_goals_until_reset(tmp_path):
-    overrides = {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000,
-                               'truth_period': 0.05, 'pace_max_lag': 0.0},
-                 'lens_planner': {'calibration_dir': str(tmp_path / 'calibration')},
-                 'painter': {'runs_dir': str(tmp_path / 'runs')}}
-    with graph_of_processes(tmp_path, NODES, overrides) as (group, graph):
+    answers = []
+
+    def emergency_stop(_handle):
+        since = rig.now()
+        answers.append(graph.call(stop, Trigger.Request(), ANSWER_TIMEOUT))
+        return since
+
+    with graph_of_processes(tmp_path, NODES, one_graph_overrides(tmp_path)) as (group, graph):
         rig = Rig(group, graph, tmp_path / 'runs')
         stop = graph.helper.create_client(Trigger, 'emergency_stop')
-        on_feedback, heating = rig.heating(index=0, n_p=5)
-        handle = rig.send(dots_along(0.08, 2), 'stopped', on_feedback=on_feedback)
-        rig.wait(heating, 'dot 0 heating', handle)
-        rig.set_world(real_time_factor=EVENT_PACE)      # the graph's reaction, not the pace
-        rig.wait_sim(0.3)
-        reference = rig.heating_peak()
-        since = rig.now()
-        response = graph.call(stop, Trigger.Request(), ANSWER_TIMEOUT)
-        off, share = rig.off_after(since, reference)
-        print(f'\nemergency stop: {response.message}\nfocus off the wood {off - since:.2f} s '
-              f'(sim) after the call, peak irradiance down to {share * 100:.1f} % of the '
-              'heating peak')
-        assert response.success and 'EMERGENCY STOP engaged' in response.message
-        assert off - since <= EMERGENCY_BOUND
+        delay, handle = painting_interrupted(rig, 'stopped', 0.08, emergency_stop, dots=2)
+        print(f'emergency stop: {answers[0].message}')
+        assert answers[0].success and 'EMERGENCY STOP engaged' in answers[0].message
+        assert delay <= EMERGENCY_BOUND
         ended = graph.goal_result(handle, ANSWER_TIMEOUT).result
         print(f'painting: {ended.message}')
         assert not ended.success and 'stopped by the EMERGENCY STOP' in ended.message

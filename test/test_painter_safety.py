@@ -254,29 +254,40 @@ def test_a_30_s_cloud_mid_dot_is_waited_out_and_the_dot_finished_to_its_target(r
     assert diameters[0] == pytest.approx(diameters[1], rel=0.15)
 
 
-def _painting_interrupted(rig, name, y, interrupt, restore=lambda: None):
+def painting_interrupted(rig, name, y, interrupt, restore=lambda: None, dots=1):
     """
-    Start a one-dot painting, interrupt it at EVENT_PACE; return (off delay, handle).
+    Interrupt a painting while its first dot heats; return (focus-off delay [s sim], handle).
 
-    `restore` undoes the interruption's cause before the world runs fast again.
+    The painting is `dots` dots at height `y` [m], interrupted at EVENT_PACE.
+    `interrupt(handle)` does it and returns the simulated time it counts from; `restore`
+    undoes the interruption's cause before the world runs fast again.
     """
     on_feedback, heating = rig.heating(index=0, n_p=5)
-    handle = rig.send(dots_along(y, 1), name, on_feedback=on_feedback)
+    handle = rig.send(dots_along(y, dots), name, on_feedback=on_feedback)
     rig.wait(heating, f'{name}: dot 0 heating', handle)
-    rig.set_world(real_time_factor=EVENT_PACE)
+    rig.set_world(real_time_factor=EVENT_PACE)      # the graph's reaction, not the pace
     try:
         rig.wait_sim(0.3)                          # paced from here on
         reference = rig.heating_peak()
-        since = interrupt()
+        since = interrupt(handle)
         off, share = rig.off_after(since, reference)
     finally:
         try:
             restore()
         finally:
-            rig.set_world(real_time_factor=0.0)
+            if all(p.alive() for p in rig.group.processes if p.label == 'sim_world'):
+                rig.set_world(real_time_factor=0.0)
     print(f'\n{name}: focus off the wood {off - since:.2f} s (sim) after it, peak '
           f'irradiance down to {share * 100:.1f} % of the heating peak')
     return off - since, handle
+
+
+def one_graph_overrides(tmp_path):
+    """Return the parameter overrides of a graph started for one painting interrupted."""
+    return {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000,
+                          'truth_period': 0.05, 'pace_max_lag': 0.0},
+            'lens_planner': {'calibration_dir': str(tmp_path / 'calibration')},
+            'painter': {'runs_dir': str(tmp_path / 'runs')}}
 
 
 def test_a_stale_thermal_stream_puts_the_focus_off_the_wood_within_half_a_second(rig):
@@ -284,7 +295,7 @@ def test_a_stale_thermal_stream_puts_the_focus_off_the_wood_within_half_a_second
     # thermal monitor has nothing to answer. (Not the monitor stopped with SIGSTOP: once, both
     # drivers fell silent from the moment of the SIGSTOP, most likely because a process
     # stopped inside Fast DDS's shared-memory transport can hold its port's lock.)
-    def unplug_thermal():
+    def unplug_thermal(_handle):
         rig.set_world(unplugged=['thermal_camera'])
         rig.wait_sim(1.5 * THERMAL_STALE)
         rig.stats.wait_for_count(1, 60.0)
@@ -296,8 +307,8 @@ def test_a_stale_thermal_stream_puts_the_focus_off_the_wood_within_half_a_second
         rig.set_world(unplugged=[''])
         rig.stats.wait_for_count(count + 1, 60.0)    # answering again: back in lockstep
 
-    delay, handle = _painting_interrupted(rig, 'stale', 0.08, unplug_thermal,
-                                          restore=plug_thermal)
+    delay, handle = painting_interrupted(rig, 'stale', 0.08, unplug_thermal,
+                                         restore=plug_thermal)
     assert delay <= OFF_BOUND
     result = rig.graph.goal_result(handle, TIMEOUT).result    # it comes back: heated again
     print(f'stale: {result.message}')
@@ -305,7 +316,7 @@ def test_a_stale_thermal_stream_puts_the_focus_off_the_wood_within_half_a_second
 
 
 def test_an_unplugged_dobot_puts_the_focus_off_the_wood_within_half_a_second(rig):
-    def unplug():
+    def unplug(_handle):
         # the world unplugs in its parameter callback, before it answers: the reaction is
         # counted from the answer, not from the request (whose trip to the world is the
         # test's, not the graph's: 1 s of wall time once under two busy processes)
@@ -313,7 +324,7 @@ def test_an_unplugged_dobot_puts_the_focus_off_the_wood_within_half_a_second(rig
         return rig.now()
 
     try:
-        delay, handle = _painting_interrupted(rig, 'unplug', 0.09, unplug)
+        delay, handle = painting_interrupted(rig, 'unplug', 0.09, unplug)
         result = rig.graph.goal_result(handle, TIMEOUT).result
     finally:
         rig.set_world(unplugged=[''])
@@ -332,29 +343,16 @@ def test_an_unplugged_dobot_puts_the_focus_off_the_wood_within_half_a_second(rig
 
 
 def test_a_cancel_puts_the_focus_off_the_wood_within_half_a_second(rig):
-    handles = []
-
-    def cancel():
+    def cancel(handle):
         since = rig.now()
-        response = rig.graph.cancel_goal(handles[0], 60.0)
+        response = rig.graph.cancel_goal(handle, 60.0)
         assert response.goals_canceling, 'the cancel was refused'
         return since
 
-    on_feedback, heating = rig.heating(index=0, n_p=5)
-    handles.append(rig.send(dots_along(0.10, 1), 'cancel', on_feedback=on_feedback))
-    rig.wait(heating, 'cancel: dot 0 heating', handles[0])
-    rig.set_world(real_time_factor=EVENT_PACE)
-    try:
-        rig.wait_sim(0.3)
-        reference = rig.heating_peak()
-        since = cancel()
-        off, share = rig.off_after(since, reference)
-    finally:
-        rig.set_world(real_time_factor=0.0)
-    response = rig.graph.goal_result(handles[0], TIMEOUT)
-    print(f'\ncancel: focus off the wood {off - since:.2f} s (sim) after it ({share * 100:.1f}'
-          f' %); {response.result.message}')
-    assert off - since <= OFF_BOUND
+    delay, handle = painting_interrupted(rig, 'cancel', 0.10, cancel)
+    response = rig.graph.goal_result(handle, TIMEOUT)
+    print(f'cancel: {response.result.message}')
+    assert delay <= OFF_BOUND
     assert response.result.message.startswith('canceled: retreated')
 
 
@@ -407,31 +405,19 @@ def test_a_killed_painter_resumes_with_no_dot_lost_or_burnt_twice(rig):
 def test_a_killed_lens_planner_leaves_the_retreat_to_the_wrist_within_half_a_second(rig):
     # the module's last test: the planner stays dead (no test after it needs one)
     planner = rig.process('lens_planner')
-    handles = []
 
-    def kill_and_cancel():
+    def kill_and_cancel(handle):
         planner.signal(signal.SIGKILL)
         planner.process.wait(30.0)
         since = rig.now()
-        response = rig.graph.cancel_goal(handles[0], 60.0)
+        response = rig.graph.cancel_goal(handle, 60.0)
         assert response.goals_canceling, 'the cancel was refused'
         return since
 
-    on_feedback, heating = rig.heating(index=0, n_p=5)
-    handles.append(rig.send(dots_along(0.12, 1), 'planner_killed', on_feedback=on_feedback))
-    rig.wait(heating, 'planner killed: dot 0 heating', handles[0])
-    rig.set_world(real_time_factor=EVENT_PACE)
-    try:
-        rig.wait_sim(0.3)
-        reference = rig.heating_peak()
-        since = kill_and_cancel()
-        off, share = rig.off_after(since, reference)
-    finally:
-        rig.set_world(real_time_factor=0.0)
-    result = rig.graph.goal_result(handles[0], TIMEOUT).result
-    print(f'\nplanner killed: focus off the wood {off - since:.2f} s (sim) after the cancel '
-          f'({share * 100:.1f} %); {result.message}')
-    assert off - since <= OFF_BOUND
+    delay, handle = painting_interrupted(rig, 'planner_killed', 0.12, kill_and_cancel)
+    result = rig.graph.goal_result(handle, TIMEOUT).result
+    print(f'planner killed: {result.message}')
+    assert delay <= OFF_BOUND
     # the dead planner still discovered (not accepted in time) or already gone from the graph
     assert 'did not accept the goal' in result.message or 'no focus server' in result.message
     assert 'the wrist turned the lens away' in result.message

@@ -13,29 +13,24 @@ where it was.
 
 from conftest import graph_of_processes
 from helio_control.run_journal import read_journal
-from test_painter_safety import dots_along, EVENT_PACE, NODES, OFF_BOUND, Rig
+from test_painter_safety import NODES, OFF_BOUND, one_graph_overrides, painting_interrupted
+from test_painter_safety import Rig
 
 
 def test_stopping_the_graph_mid_dot_puts_the_focus_off_the_wood_within_half_a_second(
         tmp_path):
-    overrides = {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000,
-                               'truth_period': 0.05, 'pace_max_lag': 0.0},
-                 'lens_planner': {'calibration_dir': str(tmp_path / 'calibration')},
-                 'painter': {'runs_dir': str(tmp_path / 'runs')}}
-    with graph_of_processes(tmp_path, NODES, overrides) as (group, graph):
-        rig = Rig(group, graph, tmp_path / 'runs')
-        on_feedback, heating = rig.heating(index=0, n_p=5)
-        handle = rig.send(dots_along(0.08, 1), 'stopped', on_feedback=on_feedback)
-        rig.wait(heating, 'dot 0 heating', handle)
-        rig.set_world(real_time_factor=EVENT_PACE)      # the graph's reaction, not the pace
-        rig.wait_sim(0.3)
-        reference = rig.heating_peak()
+    outcomes = {}
+
+    def stop(_handle):
         since = rig.now()
-        outcomes = group.stop()                         # what Ctrl-C of helio sim does
-        off, share = rig.off_after(since, reference)
-    print(f'\nstop: {outcomes}; focus off the wood {off - since:.2f} s (sim) after it, peak '
-          f'irradiance down to {share * 100:.1f} % of the heating peak')
-    assert off - since <= OFF_BOUND
+        outcomes.update(group.stop())               # what Ctrl-C of helio sim does
+        return since
+
+    with graph_of_processes(tmp_path, NODES, one_graph_overrides(tmp_path)) as (group, graph):
+        rig = Rig(group, graph, tmp_path / 'runs')
+        delay, _ = painting_interrupted(rig, 'stopped', 0.08, stop)
+    print(f'stop: {outcomes}')
+    assert delay <= OFF_BOUND
     assert outcomes['painter'] == 'SIGINT' and outcomes['lens_planner'] == 'SIGINT'
     journal = read_journal(str(tmp_path / 'runs' / 'stopped' / 'journal.jsonl'))
     assert journal.result is not None and not journal.result.success
