@@ -352,7 +352,8 @@ def check_site(site_files, sample, coordinates=site_coordinates):
     name = 'site file'
     fix = ('copy config/site.yaml, put your latitude, longitude and elevation in it (a '
            "phone's GPS is close enough) and give it to the graph: helio rig --set "
-           'sun_estimator.site_file=PATH --set lens_planner.site_file=PATH')
+           'sun_estimator.site_file=PATH --set lens_planner.site_file=PATH --set '
+           'painter.site_file=PATH')
     if not site_files:
         return Finding(name, WARN, 'no site_file known (the nodes did not answer)',
                        'give doctor the site file: --site FILE')

@@ -5,7 +5,7 @@ A client node (``InProcessGraph``, the graph's namespace) listens for `window` s
 the drivers' latched ``dobot/status`` and ``servo/status``, ``emergency_stop``, each
 camera's ``image_raw`` (raw CDR: only the header stamp is read, so images cost no
 conversion) and ``camera_info``, ``thermal/stats``, ``spot`` and ``/clock``. Meanwhile it
-asks the nodes' parameter services for ``site_file`` (sun_estimator, lens_planner),
+asks the nodes' parameter services for ``site_file`` (sun_estimator, lens_planner, painter),
 ``calibration_dir`` and ``rig_file`` (lens_planner) and ``home_on_connect`` (dobot_driver).
 It calls nothing that moves the rig.
 """
@@ -29,6 +29,7 @@ PARAMETER_TIMEOUT = 5.0        # [s] wall, for each node's get_parameters
 # matched publishers has not changed for SETTLE seconds (at most `discovery` seconds).
 SETTLE = 1.0                   # [s] wall
 ASKED = {'sun_estimator': ('site_file',),
+         'painter': ('site_file',),
          'lens_planner': ('site_file', 'calibration_dir', 'rig_file'),
          'dobot_driver': ('home_on_connect',)}
 
@@ -210,7 +211,7 @@ def gather(namespace='', window=3.0, calibration_dir=None, site_file=None, disco
     if site_file:
         facts.site_files['--site'] = site_file
     else:
-        for target in ('sun_estimator', 'lens_planner'):
+        for target in ('sun_estimator', 'lens_planner', 'painter'):
             if target in answers:
                 facts.site_files[f'{target}.site_file'] = (answers[target]['site_file'] or
                                                            facts.sample_site)
