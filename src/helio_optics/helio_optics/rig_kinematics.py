@@ -27,12 +27,19 @@ gives the same flat dict (for declaring ROS parameters).
 - ``inverse(position, yaw, pitch, check_limits=True) -> x``: joints for the lens pose
   Omega = [p_l, alpha_l, beta_l, 0]; raises ``UnreachableError`` naming the joint (or the
   reach) and by how much.
+- ``inverse_many(positions (N, 3), yaws (N,), pitches (N,), check_limits=True)
+  -> RigSolutions``: the same closed form for N poses at once (numpy; ``inverse`` is this
+  with N = 1): ``joints`` (N, 5), ``reachable`` (N,), ``failure`` (the first check failed:
+  a reach code or a joint's index in ``limits()``), ``excess``, ``flange``.
 - ``lens_pose_for_target(target, sun_direction, d_lp, preferred_yaw=None) -> LensTarget``:
   Eq 14 p_l = p_i - d_lp s0 and Eq 15 (alpha_l, beta_l) from a robot-frame target and sun
   ray; ``LensTarget`` has ``position``, ``yaw``, ``pitch``, ``d_lp``, ``x`` (joints, or None
   with ``reason`` when unreachable).
-- ``yaw_pitch_for_axis(axis, preferred_yaw=None)``: Eq 15 alone, the servo-reachable
-  solution closest to ``preferred_yaw``.
+- ``lens_poses_for_targets(targets (N, 3), sun_direction, d_lp, preferred_yaws=None)
+  -> LensTargets``: Eqs 14-15 for N targets at once (``lens_pose_for_target`` is this with
+  N = 1); ``positions``, ``yaws``, ``pitches``, ``joints``, ``reachable``.
+- ``yaw_pitch_for_axis(axis, preferred_yaw=None)``: Eq 15 alone, the solution closest to
+  ``preferred_yaw`` (a number, or an array (N,) of them: arrays (N,) of yaws and pitches).
 
 A non-finite number given to ``inverse``, ``lens_pose_for_target`` or
 ``yaw_pitch_for_axis`` (a NaN target, sun, axis or angle) raises ValueError naming the input,
@@ -42,21 +49,31 @@ instead of NaN joints with an empty reason.
 from dataclasses import dataclass, field, fields, replace
 import math
 
-from helio_optics.arm_kinematics import check_joint_limits, DobotArm, DobotArmParameters
-from helio_optics.arm_kinematics import JointLimit
+from helio_optics.arm_kinematics import BEYOND_REACH, check_joint_limits, DobotArm
+from helio_optics.arm_kinematics import DobotArmParameters, first_limit_failure, INSIDE_REACH
+from helio_optics.arm_kinematics import JointLimit, limit_bounds, limit_error, REACHABLE
 from helio_optics.arm_kinematics import UnreachableError
 from helio_optics.config_files import config_path, read_parameter_section
 from helio_optics.geometry import homogeneous, look_at, rotation_y, rotation_z, unit
 import numpy as np
 
 JOINT_NAMES = ('dobot_j1', 'dobot_j2', 'dobot_j3', 'lens_yaw', 'lens_pitch')
+# failure codes of Rig.inverse_many beyond the arm's (arm_kinematics); a limit is its index
+ON_BASE_AXIS = -4         # the yaw axis cannot be placed: the lens is on the base axis
+BEHIND_BASE_AXIS = -5     # the flange would stand behind the base axis
+HEADING_MISMATCH = -6     # the arm's base joint disagrees with the rig's (numerical guard)
 
-__all__ = ['JOINT_NAMES', 'LensTarget', 'Rig', 'RigParameters', 'RigPose', 'UnreachableError',
-           'camera_mount', 'default_rig_file', 'load_rig_parameters']
+__all__ = ['JOINT_NAMES', 'LensTarget', 'LensTargets', 'Rig', 'RigParameters', 'RigPose',
+           'RigSolutions', 'UnreachableError', 'camera_mount', 'default_rig_file',
+           'load_rig_parameters']
 
 
 def _finite(name, value, size=None):
     """Return `value` as floats (shape (size,) when given); ValueError naming a non-finite one."""
+    if size is None and isinstance(value, float):
+        if not math.isfinite(value):
+            raise ValueError(f'{name} must be finite, got {value}')
+        return value
     array = np.asarray(value, dtype=float)
     if size is not None:
         array = array.reshape(size)
@@ -178,6 +195,40 @@ class RigPose:
 
 
 @dataclass
+class RigSolutions:
+    """
+    Joints for N lens poses (``Rig.inverse_many``) and the first check each one fails.
+
+    ``failure`` per pose: ``REACHABLE``; ``ON_BASE_AXIS``, ``BEHIND_BASE_AXIS``,
+    ``BEYOND_REACH``, ``INSIDE_REACH``, ``HEADING_MISMATCH`` (no closed-form solution:
+    NaN joints); or the index in ``RigParameters.limits()`` of the first joint outside
+    its limit. ``excess`` says by how much [m or rad], ``flange`` where the flange would be.
+    """
+
+    joints: np.ndarray      # (N, 5) [rad]
+    failure: np.ndarray     # (N,) int
+    excess: np.ndarray      # (N,) [m or rad]
+    flange: np.ndarray      # (N, 3) [m], robot frame
+
+    @property
+    def reachable(self):
+        """Return the mask (N,) of the poses every check passed."""
+        return self.failure == REACHABLE
+
+
+@dataclass
+class LensTargets:
+    """Lens poses Omega (Eqs 14-15) for N targets, their joints and whether they reach."""
+
+    positions: np.ndarray   # (N, 3) p_l [m]
+    yaws: np.ndarray        # (N,) alpha_l [rad] of the solution taken
+    pitches: np.ndarray     # (N,) beta_l [rad]
+    d_lp: float
+    joints: np.ndarray      # (N, 5) [rad], NaN or out of limits where not reachable
+    reachable: np.ndarray   # (N,) bool
+
+
+@dataclass
 class LensTarget:
     """A lens pose Omega (Eqs 14-15) and the joints that reach it (None when unreachable)."""
 
@@ -198,6 +249,7 @@ class Rig:
         self.arm = DobotArm(self.parameters.arm)
         self._T_lens_rgb = self.parameters.T_lens_rgb
         self._T_lens_thermal = self.parameters.T_lens_thermal
+        self._bounds_of = self._bounds = None
 
     def forward(self, x):
         """Return the RigPose at joints x (5 values) [rad]."""
@@ -218,41 +270,98 @@ class Rig:
         """
         Joints x for the lens pose Omega = [position, yaw, pitch, 0] (robot frame, rad).
 
-        Closed form: the pitch- and lens-offsets are fixed by (yaw, pitch); the yaw-axis
-        offset turns with j1, which is solved from the horizontal distance. Raises
-        UnreachableError naming the joint (or the reach) and by how much.
+        ``inverse_many`` for one pose. Raises UnreachableError naming the joint (or the
+        reach) and by how much.
         """
-        p = self.parameters
         position = _finite('lens position', position, 3)
         yaw, pitch = _finite('lens yaw', yaw), _finite('lens pitch', pitch)
-        rotation_yaw = rotation_z(yaw)
-        # q = flange + Rz(j1) a, with a the yaw-axis offset in the flange frame.
-        q = position - rotation_yaw @ (np.asarray(p.pitch_axis_offset, dtype=float)
-                                       + rotation_y(pitch) @ np.asarray(p.lens_offset,
-                                                                        dtype=float))
-        a = np.asarray(p.yaw_axis_offset, dtype=float)
-        horizontal = math.hypot(q[0], q[1])
-        if horizontal < abs(a[1]) + 1e-9:
-            raise UnreachableError(
+        solutions = self.inverse_many(position[None], np.array([yaw]), np.array([pitch]),
+                                      check_limits)
+        if solutions.failure[0] != REACHABLE:
+            raise self._unreachable(position, solutions, 0)
+        return solutions.joints[0]
+
+    def inverse_many(self, positions, yaws, pitches, check_limits=True):
+        """
+        Joints for N lens poses Omega = [p_l, alpha_l, beta_l, 0] of Eqs 14-15 (robot frame).
+
+        `positions` (N, 3) [m], `yaws` and `pitches` (N,) [rad]. Closed form: the pitch- and
+        lens-offsets are fixed by (yaw, pitch); the yaw-axis offset turns with j1, which is
+        solved from the horizontal distance; the arm's ``inverse_many`` places the flange.
+        Returns ``RigSolutions``: joints (N, 5) and per pose the first check it fails
+        (``reachable`` its mask), by how much, and the flange position.
+        """
+        p = self.parameters
+        positions = np.asarray(positions, dtype=float).reshape(-1, 3)
+        yaws, pitches = np.asarray(yaws, dtype=float), np.asarray(pitches, dtype=float)
+        lens, pitch_axis, a = p.lens_offset, p.pitch_axis_offset, p.yaw_axis_offset
+        # v = pitch-axis offset + Ry(pitch) lens offset; q = flange + Rz(j1) a = p_l - Rz(yaw) v
+        cos_pitch, sin_pitch = np.cos(pitches), np.sin(pitches)
+        cos_yaw, sin_yaw = np.cos(yaws), np.sin(yaws)
+        v0 = pitch_axis[0] + cos_pitch * lens[0] + sin_pitch * lens[2]
+        v1 = pitch_axis[1] + lens[1]
+        v2 = pitch_axis[2] - sin_pitch * lens[0] + cos_pitch * lens[2]
+        q0 = positions[:, 0] - (cos_yaw * v0 - sin_yaw * v1)
+        q1 = positions[:, 1] - (sin_yaw * v0 + cos_yaw * v1)
+        horizontal = np.hypot(q0, q1)
+        along = np.sqrt(np.maximum(horizontal ** 2 - a[1] ** 2, 0.0))  # = flange reach + a_x
+        j1 = np.arctan2(q1, q0) - np.arctan2(a[1], along)
+        reach = along - a[0]
+        flange = np.empty((len(positions), 3))
+        flange[:, 0] = reach * np.cos(j1)
+        flange[:, 1] = reach * np.sin(j1)
+        flange[:, 2] = positions[:, 2] - v2 - a[2]
+        arm_joints, failure, excess = self.arm.inverse_many(flange, check_limits=False)
+        # the checks in the order a pose fails them first: base axis, behind it, the arm
+        on_axis = horizontal < abs(a[1]) + 1e-9
+        behind = reach <= 0.0
+        mismatch = np.abs(_remainder(arm_joints[:, 0] - j1)) > 1e-9
+        unsolved = on_axis | behind | mismatch | (failure != REACHABLE)
+        joints = np.empty((len(positions), 5))
+        joints[:, 0] = j1
+        joints[:, 1:3] = arm_joints[:, 1:]
+        joints[:, 3] = _remainder(yaws - j1)
+        joints[:, 4] = pitches
+        if unsolved.any():
+            failure[mismatch & (failure == REACHABLE)] = HEADING_MISMATCH
+            failure[behind] = BEHIND_BASE_AXIS
+            excess[behind] = -reach[behind]
+            failure[on_axis] = ON_BASE_AXIS
+            excess[on_axis] = abs(a[1]) - horizontal[on_axis]
+            joints[unsolved] = np.nan
+        if check_limits:
+            first_limit_failure(self._limit_bounds(), joints, failure, excess)
+        return RigSolutions(joints=joints, failure=failure, excess=excess, flange=flange)
+
+    def _limit_bounds(self):
+        """Return the (lower, upper) arrays of the five joint limits [rad] (kept)."""
+        if self._bounds_of is not self.parameters:
+            self._bounds = limit_bounds(self.parameters.limits())
+            self._bounds_of = self.parameters
+        return self._bounds
+
+    def _unreachable(self, position, solutions, index):
+        """Return the UnreachableError of pose `index` of ``inverse_many``'s `solutions`."""
+        failure, excess = solutions.failure[index], float(solutions.excess[index])
+        if failure == ON_BASE_AXIS:
+            horizontal = abs(self.parameters.yaw_axis_offset[1]) - excess
+            return UnreachableError(
                 f'lens position {position} lies on the arm base axis '
                 f'(horizontal distance {horizontal * 1000:.1f} mm)', joint='reach',
-                excess=abs(a[1]) - horizontal)
-        along = math.sqrt(horizontal ** 2 - a[1] ** 2)  # = flange reach + a_x
-        j1 = math.atan2(q[1], q[0]) - math.atan2(a[1], along)
-        reach = along - a[0]
-        flange = np.array([reach * math.cos(j1), reach * math.sin(j1), q[2] - a[2]])
-        if reach <= 0.0:
-            raise UnreachableError(
-                f'lens position {position} needs the flange {-reach * 1000:.1f} mm behind '
-                'the base axis', joint='reach', excess=-reach)
-        arm_joints = self.arm.inverse(flange, check_limits=False)
-        if abs(math.remainder(arm_joints[0] - j1, 2.0 * math.pi)) > 1e-9:
-            raise UnreachableError('flange heading does not match the base joint', 'reach')
-        x = np.array([j1, arm_joints[1], arm_joints[2],
-                      math.remainder(yaw - j1, 2.0 * math.pi), pitch])
-        if check_limits:
-            self.check_limits(x)
-        return x
+                excess=excess)
+        if failure == BEHIND_BASE_AXIS:
+            return UnreachableError(
+                f'lens position {position} needs the flange {excess * 1000:.1f} mm behind '
+                'the base axis', joint='reach', excess=excess)
+        if failure in (BEYOND_REACH, INSIDE_REACH):
+            side = 'beyond' if failure == BEYOND_REACH else 'inside'
+            return UnreachableError(
+                f"target {solutions.flange[index]} is {side} the arm's reach by "
+                f'{excess * 1000:.1f} mm', joint='reach', excess=excess)
+        if failure == HEADING_MISMATCH:
+            return UnreachableError('flange heading does not match the base joint', 'reach')
+        limit = self.parameters.limits()[failure]
+        return limit_error(limit, solutions.joints[index, failure])
 
     def set_world(self, world_in_robot, world_yaw):
         """
@@ -279,55 +388,128 @@ class Rig:
 
         Of the two solutions (alpha, beta) and (alpha + pi, -beta) return the one whose
         servo yaw (alpha - j1, j1 unknown here: relative to `preferred_yaw`) is closest to
-        `preferred_yaw` (default 0). A vertical axis keeps alpha = preferred_yaw.
+        `preferred_yaw` (default 0). A vertical axis keeps alpha = preferred_yaw. With an
+        array of preferred yaws (N,), arrays (N,) of both angles, one per preferred yaw.
         """
         axis = _finite('lens axis', axis, 3)
         if not np.any(axis):
             raise ValueError('lens axis must not be the zero vector')
-        axis = unit(axis)
-        reference = 0.0 if preferred_yaw is None else _finite('preferred_yaw', preferred_yaw)
-        horizontal = math.hypot(axis[0], axis[1])
-        if horizontal < 1e-12:
-            return reference, math.atan2(horizontal, axis[2])
-        beta = math.atan2(horizontal, axis[2])
-        alpha = math.atan2(axis[1], axis[0])
-        other = alpha + math.pi
-        if abs(math.remainder(other - reference, 2 * math.pi)) < \
-                abs(math.remainder(alpha - reference, 2 * math.pi)):
-            alpha, beta = other, -beta
-        return reference + math.remainder(alpha - reference, 2 * math.pi), beta
+        if preferred_yaw is None:
+            preferred_yaw = 0.0
+        reference = np.asarray(preferred_yaw, dtype=float)
+        if not np.all(np.isfinite(reference)):
+            raise ValueError(f'preferred_yaw must be finite, got {reference.tolist()}')
+        yaw, pitch = _yaw_pitch_for_axis(unit(axis), reference.reshape(-1))
+        if reference.ndim == 0:
+            return float(yaw[0]), float(pitch[0])
+        return yaw.reshape(reference.shape), pitch.reshape(reference.shape)
 
     def lens_pose_for_target(self, target, sun_direction, d_lp, preferred_yaw=None):
         """
         Eqs 14-15: lens pose and joints that focus the sun ray onto `target` (robot frame).
 
-        p_l = p_i - d_lp s0, the lens axis along -s0. Both wrist solutions are tried (the
-        one nearest `preferred_yaw` first); the result's ``x`` is None with ``reason``
-        when neither is reachable.
+        ``lens_poses_for_targets`` for one target; the result's ``x`` is None with
+        ``reason`` (each wrist solution's UnreachableError) when neither is reachable.
         """
-        if not (math.isfinite(d_lp) and d_lp > 0.0):
-            raise ValueError(f'd_lp must be a finite value > 0 m, got {d_lp}')
+        _check_d_lp(d_lp)
         target = _finite('target', target, 3)
-        sun_direction = _finite('sun_direction', sun_direction, 3)
-        if not np.any(sun_direction):
-            raise ValueError('sun_direction must not be the zero vector')
         if preferred_yaw is not None:
-            preferred_yaw = _finite('preferred_yaw', preferred_yaw)
-        s0 = unit(sun_direction)
-        if s0[2] >= 0.0:
-            raise ValueError(f'the sun ray {s0} does not point down: the sun is not up')
-        position = target - d_lp * s0
-        heading = math.atan2(position[1], position[0])
-        reference = heading if preferred_yaw is None else preferred_yaw
-        yaw, pitch = self.yaw_pitch_for_axis(-s0, reference)
-        reasons = []
-        for alpha, beta in ((yaw, pitch), (yaw + math.pi, -pitch)):
-            alpha = reference + math.remainder(alpha - reference, 2 * math.pi)
-            try:
-                x = self.inverse(position, alpha, beta)
-            except UnreachableError as error:
-                reasons.append(str(error))
-                continue
-            return LensTarget(position=position, yaw=alpha, pitch=beta, d_lp=d_lp, x=x)
-        return LensTarget(position=position, yaw=yaw, pitch=pitch, d_lp=d_lp, x=None,
-                          reason='; '.join(dict.fromkeys(reasons)))
+            preferred_yaw = np.array([_finite('preferred_yaw', preferred_yaw)])
+        positions, yaws, pitches, solutions = self._lens_pose_solutions(
+            target[None], _sun_ray(sun_direction), d_lp, preferred_yaw)
+        position = positions[0]
+        for index in (0, 1):
+            if solutions.failure[index] == REACHABLE:
+                return LensTarget(position=position, yaw=float(yaws[index]),
+                                  pitch=float(pitches[index]), d_lp=d_lp,
+                                  x=solutions.joints[index])
+        reasons = [str(self._unreachable(position, solutions, index)) for index in (0, 1)]
+        return LensTarget(position=position, yaw=float(yaws[0]), pitch=float(pitches[0]),
+                          d_lp=d_lp, x=None, reason='; '.join(dict.fromkeys(reasons)))
+
+    def lens_poses_for_targets(self, targets, sun_direction, d_lp, preferred_yaws=None):
+        """
+        Eqs 14-15 for N targets (N, 3) (robot frame) and one sun ray: ``LensTargets``.
+
+        p_l = p_i - d_lp s0 (Eq 14), the lens axis along -s0 (Eq 15). Of the two wrist
+        solutions (alpha, beta) and (alpha + pi, -beta), the one whose yaw is nearest the
+        preferred yaw (default: the heading of p_l) is taken when reachable, else the other;
+        ``reachable`` says whether either is. `preferred_yaws` (N,) [rad].
+        """
+        _check_d_lp(d_lp)
+        targets = np.asarray(targets, dtype=float).reshape(-1, 3)
+        if not np.all(np.isfinite(targets)):
+            raise ValueError('targets must be finite')
+        if preferred_yaws is not None:
+            preferred_yaws = np.asarray(preferred_yaws, dtype=float).reshape(-1)
+            if not np.all(np.isfinite(preferred_yaws)):
+                raise ValueError('preferred_yaws must be finite')
+        positions, yaws, pitches, solutions = self._lens_pose_solutions(
+            targets, _sun_ray(sun_direction), d_lp, preferred_yaws)
+        count = len(targets)
+        first = solutions.failure[:count] == REACHABLE
+        second = solutions.failure[count:] == REACHABLE
+        return LensTargets(positions=positions, yaws=np.where(first, yaws[:count],
+                                                              yaws[count:]),
+                           pitches=np.where(first, pitches[:count], pitches[count:]),
+                           d_lp=d_lp, joints=np.where(first[:, None],
+                                                      solutions.joints[:count],
+                                                      solutions.joints[count:]),
+                           reachable=first | second)
+
+    def _lens_pose_solutions(self, targets, s0, d_lp, preferred_yaws):
+        """
+        Return p_l (N, 3) and both wrist solutions' yaws, pitches (2N,) and RigSolutions.
+
+        Eq 14 p_l = p_i - d_lp s0 for the unit ray `s0`; Eq 15 the lens axis along -s0,
+        the solution nearest `preferred_yaws` (N,) (default: p_l's heading) in the first N
+        rows, the other wrist solution (alpha + pi, -beta) in the last N.
+        """
+        positions = targets - d_lp * s0
+        reference = np.arctan2(positions[:, 1], positions[:, 0]) if preferred_yaws is None \
+            else preferred_yaws
+        yaw, pitch = _yaw_pitch_for_axis(-s0, reference)
+        yaws = np.concatenate([reference + _remainder(yaw - reference),
+                               reference + _remainder(yaw + math.pi - reference)])
+        pitches = np.concatenate([pitch, -pitch])
+        solutions = self.inverse_many(np.concatenate([positions, positions]), yaws, pitches)
+        return positions, yaws, pitches, solutions
+
+
+def _check_d_lp(d_lp):
+    """Raise ValueError unless the lens distance d_lp is finite and > 0 [m]."""
+    if not (math.isfinite(d_lp) and d_lp > 0.0):
+        raise ValueError(f'd_lp must be a finite value > 0 m, got {d_lp}')
+
+
+def _sun_ray(sun_direction):
+    """Return the unit sun ray s0 (3,); ValueError unless finite, non-zero and pointing down."""
+    sun_direction = _finite('sun_direction', sun_direction, 3)
+    if not np.any(sun_direction):
+        raise ValueError('sun_direction must not be the zero vector')
+    s0 = unit(sun_direction)
+    if s0[2] >= 0.0:
+        raise ValueError(f'the sun ray {s0} does not point down: the sun is not up')
+    return s0
+
+
+def _remainder(angle):
+    """Return `angle` [rad] wrapped to [-pi, pi] as ``math.remainder(angle, 2 pi)`` does."""
+    return angle - 2.0 * math.pi * np.round(angle / (2.0 * math.pi))
+
+
+def _yaw_pitch_for_axis(axis, reference):
+    """
+    Eq 15 for one unit lens `axis` and references (N,) [rad]: yaws and pitches (N,).
+
+    Per reference, of (alpha, beta) and (alpha + pi, -beta) the one whose yaw is nearest
+    it, wrapped to within pi of it; a vertical axis keeps alpha = the reference.
+    """
+    horizontal = math.hypot(axis[0], axis[1])
+    beta = math.atan2(horizontal, axis[2])
+    if horizontal < 1e-12:
+        return reference.copy(), np.full(reference.shape, beta)
+    alpha = math.atan2(axis[1], axis[0])
+    flip = np.abs(_remainder(alpha + math.pi - reference)) < np.abs(_remainder(alpha - reference))
+    alpha = np.where(flip, alpha + math.pi, alpha)
+    return reference + _remainder(alpha - reference), np.where(flip, -beta, beta)

@@ -149,3 +149,43 @@ def test_finite_inputs_near_the_checks_still_reach_their_joints():
     assert pose.x is not None and np.all(np.isfinite(pose.x)), pose.reason
     np.testing.assert_allclose(rig.forward(pose.x).T_robot_lens[:3, 3], target - 0.082 * sun,
                                atol=1e-9)
+
+
+def test_many_poses_at_once_are_the_poses_one_at_a_time():
+    # a rig with every offset non-zero, so that each failure (the base axis too) occurs
+    rig = Rig(RigParameters(lens_offset=(0.004, -0.003, -0.012),
+                            yaw_axis_offset=(0.028, 0.006, -0.045)))
+    rng = np.random.default_rng(5)
+    positions = rng.uniform([-0.4, -0.4, -0.3], [0.4, 0.4, 0.3], (3000, 3))
+    positions[::100, :2] = rng.uniform(-0.005, 0.005, (30, 2))
+    yaws, pitches = rng.uniform(-4.0, 4.0, 3000), rng.uniform(-2.0, 2.0, 3000)
+    solutions = rig.inverse_many(positions, yaws, pitches)
+    joints = set()
+    for index in range(len(positions)):
+        try:
+            x = rig.inverse(positions[index], yaws[index], pitches[index])
+        except UnreachableError as error:
+            assert not solutions.reachable[index]
+            assert error.excess == pytest.approx(solutions.excess[index], abs=1e-12)
+            joints.add(error.joint)
+            continue
+        assert solutions.reachable[index]
+        np.testing.assert_allclose(solutions.joints[index], x, atol=1e-12)
+    assert joints == {'reach', 'j1 (base)', 'j2 (rear arm)', 'j3 (forearm)', 'lens_yaw',
+                      'lens_pitch'}
+    assert 0.01 < solutions.reachable.mean() < 0.5
+    # Eqs 14-15 for many targets: the same pose and joints as target by target
+    targets = rng.uniform([-0.1, -0.3, -0.2], [0.4, 0.3, -0.1], (300, 3))
+    sun = -direction_from_angles(math.radians(35.0), math.radians(120.0))
+    many = rig.lens_poses_for_targets(targets, sun, 0.082, preferred_yaws=yaws[:300])
+    for index, target in enumerate(targets):
+        one = rig.lens_pose_for_target(target, sun, 0.082, preferred_yaw=yaws[index])
+        assert many.reachable[index] == (one.x is not None)
+        if one.x is not None:
+            np.testing.assert_allclose(many.joints[index], one.x, atol=1e-12)
+            assert many.yaws[index] == pytest.approx(one.yaw, abs=1e-12)
+            assert many.pitches[index] == pytest.approx(one.pitch, abs=1e-12)
+    yaw, pitch = rig.yaw_pitch_for_axis(-sun, yaws[:5])
+    for index in range(5):
+        assert (yaw[index], pitch[index]) == pytest.approx(
+            rig.yaw_pitch_for_axis(-sun, yaws[index]), abs=1e-12)
