@@ -23,9 +23,9 @@ distances, tilts off the sun in four directions and both solutions of the wrist 
 second turns the cameras to the other side of the lens): with the camera fixed beside the
 lens, only some of them show the marker and the spot for a given sun.
 
-No rclpy. API: ``view_points``, ``in_view``, ``candidate_poses``, ``acquisition_poses``,
-``sweep_poses``, ``spot_separation`` (how far apart a set of poses casts the spots of two
-suns).
+No rclpy. API: ``view_points``, ``in_view`` (``in_view_many``: many camera poses at once),
+``candidate_poses``, ``acquisition_poses``, ``sweep_poses``, ``spot_separation`` (how far
+apart a set of poses casts the spots of two suns).
 """
 
 import math
@@ -45,13 +45,33 @@ def marker_corners(marker_side):
 
 def in_view(camera, T_world_camera, points, margin=30.0):
     """Return whether the world `points` project into the image with `margin` [px]."""
-    camera_points = transform_points(invert_transform(T_world_camera),
-                                     np.atleast_2d(np.asarray(points, dtype=float)))
-    if np.any(camera_points[:, 2] <= 0.0):
-        return False
-    pixels = camera.project(camera_points)
+    points = np.atleast_2d(np.asarray(points, dtype=float))
+    seen, _ = in_view_many(camera, np.asarray(T_world_camera, dtype=float)[None], points, margin)
+    return bool(seen[0])
+
+
+def in_view_many(camera, T_world_cameras, points, margin=30.0, tolerance=0.0):
+    """
+    Return per camera pose whether its world points project into the image, and the pixels.
+
+    `T_world_cameras` (M, 4, 4) are the camera poses, `points` (M, K, 3) or (K, 3) (the
+    same for every pose) world points [m]. A pose sees its points when all lie in front of
+    the camera and project at least `margin` [px] inside the image (less `tolerance` [px]).
+    Returns (seen (M,), pixels (M, K, 2)); the pixels of a point behind the camera mean
+    nothing (its pose is not seen).
+    """
+    T_world_cameras = np.asarray(T_world_cameras, dtype=float).reshape(-1, 4, 4)
+    count = len(T_world_cameras)
+    rotations, origins = T_world_cameras[:, :3, :3], T_world_cameras[:, :3, 3]
+    # R^T (p - t) of every point, as rows: (p - t)^T R
+    local = (np.asarray(points, dtype=float) - origins[:, None, :]) @ rotations
+    in_front = np.all(local[..., 2] > 0.0, axis=1)
+    depth = np.where(local[..., 2] > 0.0, local[..., 2], 1.0)[..., None]
+    pixels = camera.project((local / depth).reshape(-1, 3)).reshape(count, -1, 2)
     limit = np.array([camera.width, camera.height]) - margin
-    return bool(np.all((pixels >= margin) & (pixels <= limit)))
+    inside = np.all((pixels >= margin - tolerance) & (pixels <= limit + tolerance),
+                    axis=(1, 2))
+    return in_front & inside, pixels
 
 
 def sun_ray(elevation, azimuth_robot):

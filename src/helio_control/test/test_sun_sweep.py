@@ -7,7 +7,7 @@ that a level lens cannot.
 
 import math
 
-from helio_control.sun_sweep import acquisition_poses, in_view, marker_corners
+from helio_control.sun_sweep import acquisition_poses, in_view, in_view_many, marker_corners
 from helio_control.sun_sweep import sees_marker_and_spot, spot_separation, sun_ray
 from helio_control.sun_sweep import sweep_poses, tilted_axis, view_points
 from helio_optics.geometry import invert_transform, PinholeCamera
@@ -120,3 +120,21 @@ def test_acquisition_aims_at_every_azimuth_guess_where_the_camera_would_see_the_
         axis = rig.forward(x).T_robot_lens[:3, 2]
         assert math.degrees(math.acos(min(1.0, float(axis @ -sun)))) < 30.0 + 1e-6
         assert sees_marker_and_spot(rig, x, sun, CAMERA, T, MARKER_SIDE, 30.0)
+
+
+def test_in_view_of_many_camera_poses_is_in_view_of_each(rig):
+    rng = np.random.default_rng(11)
+    T_world_robot = invert_transform(rig.parameters.T_robot_world)
+    poses = np.array([T_world_robot @ rig.forward(rng.uniform(-1.2, 1.2, 5)).T_robot_rgb
+                      for _ in range(200)])
+    points = rng.uniform([-0.05, -0.05, 0.0], [0.15, 0.15, 0.0], (200, 3, 3))
+    seen, pixels = in_view_many(CAMERA, poses, points, 30.0)
+    assert 0 < seen.sum() < len(poses)
+    for T, these, each, each_pixels in zip(poses, points, seen, pixels):
+        assert each == in_view(CAMERA, T, these, 30.0)
+        local = these @ T[:3, :3] - T[:3, 3] @ T[:3, :3]
+        if np.all(local[:, 2] > 0.0):
+            np.testing.assert_allclose(each_pixels, CAMERA.project(local), atol=1e-9)
+    corners = marker_corners(MARKER_SIDE)          # one set of points for every pose
+    seen, _ = in_view_many(CAMERA, poses, corners, 30.0)
+    assert [bool(each) for each in seen] == [in_view(CAMERA, T, corners, 30.0) for T in poses]
