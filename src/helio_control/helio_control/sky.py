@@ -32,11 +32,12 @@ compass azimuth of its x axis with z vertical (``ephemeris.ray_angles_from_sun``
 mapping the simulated world places its sun with): the sun stands h - A counter-clockwise
 from the robot's x axis for a compass azimuth A. Both checks depend on that ray alone.
 
-Speed: a day and a scan of 24 headings ask for some 2,500 verdicts. ``Rig`` answers one pose
-at a time (about 0.1 ms); ``reach_mask`` transcribes ``Rig.lens_pose_for_target`` and
-``Rig.inverse`` into numpy for the whole grid at once, and the sweep's search discards the
-poses that cannot pass (unreachable, or out of the image) in numpy before the lens
-planner's own checks confirm the rest (``SkyModel.candidate_count``). Tests hold both to
+Speed: a day and a scan of 24 headings ask for some 2,500 verdicts. Asked one pose at a
+time the rig model takes about 0.1 ms a pose; ``reach_mask`` asks it for the whole grid at
+once (``Rig.lens_poses_for_targets``, numpy), and the sweep's search discards the poses
+that cannot pass (unreachable by ``Rig.inverse_many``, or out of the image by
+``sun_sweep.in_view_many``) before the lens planner's own checks confirm the rest
+(``SkyModel.candidate_count``). Tests hold both to
 ``dot_layout.check_reach`` and ``sun_sweep.candidate_poses`` (src/helio_control/test/
 test_sky.py); the reasons printed come from the rig model itself.
 
@@ -64,7 +65,6 @@ from helio_control.dot_layout import check_reach
 from helio_optics.ephemeris import ray_angles_from_sun, Site, sun_position
 from helio_optics.geometry import direction_from_angles, invert_transform, PinholeCamera
 from helio_optics.geometry import transform_points
-from helio_optics.rig_kinematics import UnreachableError
 import numpy as np
 
 SUN_RADIUS_DEG = 0.2667        # apparent semi-diameter of the sun: sunrise at the upper limb
@@ -200,84 +200,15 @@ def heading_from_ray(sun_ray, position):
     return (math.atan2(-ray[1], -ray[0]) + position.azimuth) % (2.0 * math.pi)
 
 
-def _remainder(angle):
-    """Return `angle` wrapped to [-pi, pi] as ``math.remainder(angle, 2 pi)`` does."""
-    return angle - 2.0 * math.pi * np.round(angle / (2.0 * math.pi))
-
-
-def _yaw_pitch_for_axis(axis, reference):
-    """``Rig.yaw_pitch_for_axis`` (Eq 15) for one unit axis and an array of references."""
-    horizontal = math.hypot(axis[0], axis[1])
-    beta = math.atan2(horizontal, axis[2])
-    if horizontal < 1e-12:
-        return reference.copy(), np.full_like(reference, beta)
-    alpha = math.atan2(axis[1], axis[0])
-    flip = np.abs(_remainder(alpha + math.pi - reference)) < np.abs(_remainder(alpha - reference))
-    alpha = np.where(flip, alpha + math.pi, alpha)
-    return reference + _remainder(alpha - reference), np.where(flip, -beta, beta)
-
-
-def _inverse_ok(parameters, position, yaw, pitch):
-    """``Rig.inverse`` with its limits, for arrays of lens poses: whether each is reachable."""
-    p, arm = parameters, parameters.arm
-    lens = np.asarray(p.lens_offset, dtype=float)
-    offset = np.asarray(p.pitch_axis_offset, dtype=float)
-    a = np.asarray(p.yaw_axis_offset, dtype=float)
-    # v = pitch-axis offset + Ry(pitch) lens offset; q = position - Rz(yaw) v
-    v0 = offset[0] + np.cos(pitch) * lens[0] + np.sin(pitch) * lens[2]
-    v1 = offset[1] + lens[1]
-    v2 = offset[2] - np.sin(pitch) * lens[0] + np.cos(pitch) * lens[2]
-    q0 = position[:, 0] - (np.cos(yaw) * v0 - np.sin(yaw) * v1)
-    q1 = position[:, 1] - (np.sin(yaw) * v0 + np.cos(yaw) * v1)
-    q2 = position[:, 2] - v2
-    horizontal = np.hypot(q0, q1)
-    ok = horizontal >= abs(a[1]) + 1e-9
-    along = np.sqrt(np.maximum(horizontal ** 2 - a[1] ** 2, 0.0))
-    j1 = np.arctan2(q1, q0) - np.arctan2(a[1], along)
-    reach = along - a[0]
-    ok &= reach > 0.0
-    # DobotArm.inverse of the flange (reach cos j1, reach sin j1, q2 - a_z), elbow up
-    fx, fy, fz = reach * np.cos(j1), reach * np.sin(j1), q2 - a[2]
-    flat = np.hypot(fx, fy) - arm.tool_x
-    height = fz - arm.tool_z - arm.base_height
-    distance = np.hypot(flat, height)
-    ok &= (distance <= arm.rear_arm + arm.forearm) & \
-        (distance >= abs(arm.rear_arm - arm.forearm))
-    with np.errstate(divide='ignore', invalid='ignore'):
-        spread = (arm.rear_arm ** 2 + distance ** 2 - arm.forearm ** 2) / (
-            2.0 * arm.rear_arm * distance)
-        a1 = np.arctan2(height, flat) + np.arccos(np.clip(spread, -1.0, 1.0))
-    a2 = np.arctan2(height - arm.rear_arm * np.sin(a1), flat - arm.rear_arm * np.cos(a1))
-    ok &= np.abs(_remainder(np.arctan2(fy, fx) - j1)) <= 1e-9
-    joints = (j1, 0.5 * math.pi - a1, -a2, _remainder(yaw - j1), pitch)
-    for limit, value in zip(p.limits(), joints):
-        ok &= (value >= limit.lower) & (value <= limit.upper)
-    return ok
-
-
-def _lens_pose_ok(rig, targets, ray, d_lp, preferred_yaw=None):
-    """``Rig.lens_pose_for_target`` (Eqs 14-15, both wrist solutions): (reachable, yaw)."""
-    position = targets - d_lp * ray
-    reference = np.arctan2(position[:, 1], position[:, 0]) if preferred_yaw is None \
-        else preferred_yaw
-    yaw, pitch = _yaw_pitch_for_axis(-ray, reference)
-    first = reference + _remainder(yaw - reference)
-    second = reference + _remainder(yaw + math.pi - reference)
-    ok_first = _inverse_ok(rig.parameters, position, first, pitch)
-    ok_second = _inverse_ok(rig.parameters, position, second, -pitch)
-    return ok_first | ok_second, np.where(ok_first, first, second)
-
-
 def reach_mask(rig, points, sun_ray, d_lp, retreat):
     """
     Return per world point (N, 2) [m] whether its dot is reachable, as ``check_reach`` says.
 
-    A numpy transcription of the rig model for many points at once (about a hundred times
-    faster than ``dot_layout.check_reach``, which asks ``Rig.lens_pose_for_target`` point by
-    point): Eq 14 p_l = p_i - d_lp s0, Eq 15 the lens axis along -s0, both wrist solutions
-    (the one nearest the point's heading first), ``Rig.inverse``'s closed form and every
-    joint limit, at d_lp and then at d_lp + retreat keeping the heating pose's yaw. Tests
-    hold it to ``check_reach`` over many suns and points.
+    The rule of ``check_reach`` for all points at once through
+    ``Rig.lens_poses_for_targets`` (about a hundred times faster than point by point):
+    Eq 14 p_l = p_i - d_lp s0, Eq 15 the lens axis along -s0, both wrist solutions (the one
+    nearest the point's heading first), every joint limit, at d_lp and then at
+    d_lp + retreat keeping the heating pose's yaw. Tests hold it to ``check_reach``.
     """
     ray = np.asarray(sun_ray, dtype=float).reshape(3)
     ray = ray / np.linalg.norm(ray)
@@ -287,9 +218,9 @@ def reach_mask(rig, points, sun_ray, d_lp, retreat):
     transform = rig.parameters.T_robot_world
     targets = np.column_stack([points, np.zeros(len(points))]) @ transform[:3, :3].T \
         + transform[:3, 3]
-    near, yaw = _lens_pose_ok(rig, targets, ray, d_lp)
-    far, _ = _lens_pose_ok(rig, targets, ray, d_lp + retreat, preferred_yaw=yaw)
-    return near & far
+    near = rig.lens_poses_for_targets(targets, ray, d_lp)
+    far = rig.lens_poses_for_targets(targets, ray, d_lp + retreat, preferred_yaws=near.yaws)
+    return near.reachable & far.reachable
 
 
 SWEEP_STATES = ('yes', 'low', 'no view', 'down')
@@ -381,11 +312,11 @@ class SkyModel:
         Return how many poses ``sun_sweep.candidate_poses`` yields for `ray`, up to `enough`.
 
         The same poses (every view point, distance, tilt, turn and wrist solution), judged
-        the same way: each is confirmed by ``Rig.inverse`` and
-        ``sun_sweep.sees_marker_and_spot``. Before that, numpy discards at once the poses
-        that cannot pass (``_reachable_in_view``: unreachable, or the spot, and with
-        ``need_marker`` the marker, outside the image), so a sun that shows the camera
-        nothing costs milliseconds instead of a second.
+        the same way: each must be reachable (``Rig.inverse_many``, which ``Rig.inverse``
+        is for one pose) and pass ``sun_sweep.sees_marker_and_spot``. Before that, numpy
+        discards at once the poses that cannot pass (unreachable, or ``_may_be_seen``: the
+        spot, and with ``need_marker`` the marker, outside the image), so a sun that shows
+        the camera nothing costs milliseconds instead of a second.
         """
         s = self.settings
         ray = np.asarray(ray, dtype=float) / np.linalg.norm(ray)
@@ -398,34 +329,32 @@ class SkyModel:
             for turn in (_CANDIDATES['turns'] if tilt > 0.0 else (0.0,)):
                 axis = sun_sweep.tilted_axis(ray, math.radians(tilt), math.radians(turn))
                 for flip, offset in itertools.product((0.0, math.pi), _CANDIDATES['offsets']):
-                    yaw, pitch = _yaw_pitch_for_axis(axis, headings + flip)
+                    yaw, pitch = self.rig.yaw_pitch_for_axis(axis, headings + flip)
                     yaw = yaw + math.radians(offset)
-                    possible = self._reachable_in_view(centres, yaw, pitch, ray)
+                    solutions = self.rig.inverse_many(centres, yaw, pitch)
+                    possible = solutions.reachable & self._may_be_seen(centres, yaw, pitch,
+                                                                       ray)
                     for index in np.flatnonzero(possible):
-                        try:
-                            x = self.rig.inverse(centres[index], yaw[index], pitch[index])
-                        except UnreachableError:
-                            continue
                         if sun_sweep.sees_marker_and_spot(
-                                self.rig, x, ray, self.camera, self.T_robot_world,
-                                s.marker_side, s.view_margin, need_marker=s.need_marker):
+                                self.rig, solutions.joints[index], ray, self.camera,
+                                self.T_robot_world, s.marker_side, s.view_margin,
+                                need_marker=s.need_marker):
                             found += 1
                             if found >= enough:
                                 return found
         return found
 
-    def _reachable_in_view(self, centres, yaw, pitch, ray):
+    def _may_be_seen(self, centres, yaw, pitch, ray):
         """
         Return per lens pose whether it may pass ``sees_marker_and_spot``: a necessary test.
 
-        Reachable (``_inverse_ok``), and seen from the camera pose the lens pose implies
+        Seen (``sun_sweep.in_view_many``) from the camera pose the lens pose implies
         (R_robot_lens = Rz(yaw) Ry(pitch) at the lens centre, then the rig's T_lens_rgb):
         the spot (the ray through the lens centre on the panel) in the image with the
         margin; with ``need_marker`` also the marker's corners, no more obliquely than
         ``sees_marker_and_spot``'s limit and with its smallest side in pixels.
         """
         s = self.settings
-        ok = _inverse_ok(self.rig.parameters, centres, yaw, pitch)
         cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
         zero = np.zeros_like(yaw)
         lens = np.stack([np.stack([cy * cp, -sy, cy * sp], -1),
@@ -433,32 +362,27 @@ class SkyModel:
                          np.stack([-sp, zero, cp], -1)], -2)          # Rz(yaw) Ry(pitch)
         T_lens_rgb = self.rig.parameters.T_lens_rgb
         T_world_robot = invert_transform(self.T_robot_world)
-        rotation = T_world_robot[:3, :3] @ lens @ T_lens_rgb[:3, :3]       # world <- rgb
-        origin = (centres + lens @ T_lens_rgb[:3, 3]) @ T_world_robot[:3, :3].T \
+        T_world_rgb = np.broadcast_to(np.eye(4), (len(centres), 4, 4)).copy()
+        T_world_rgb[:, :3, :3] = T_world_robot[:3, :3] @ lens @ T_lens_rgb[:3, :3]
+        T_world_rgb[:, :3, 3] = (centres + lens @ T_lens_rgb[:3, 3]) @ T_world_robot[:3, :3].T \
             + T_world_robot[:3, 3]
         normal, plane = self.T_robot_world[:3, 2], self.T_robot_world[:3, 3]
         along = float(ray @ normal)
         distance = ((plane - centres) @ normal) / along if along < -1e-9 else \
             np.full(len(centres), -1.0)
-        ok &= distance > 0.0
+        ok = distance > 0.0
         spots = transform_points(T_world_robot, centres + distance[:, None] * ray)
 
-        def seen(points):                       # sun_sweep.in_view for (M, K, 3) points
-            local = np.einsum('mji,mkj->mki', rotation, points - origin[:, None, :])
-            front = np.all(local[..., 2] > 0.0, axis=1)
-            depth = np.where(local[..., 2] > 0.0, local[..., 2], 1.0)[..., None]
-            pixels = self.camera.project((local / depth).reshape(-1, 3)).reshape(
-                len(local), -1, 2)
-            limit = np.array([self.camera.width, self.camera.height]) - s.view_margin
-            inside = np.all((pixels >= s.view_margin - 1e-6) & (pixels <= limit + 1e-6),
-                            axis=(1, 2))          # rounding passes: the exact check decides
-            return front & inside, pixels
+        def seen(points):         # rounding passes: the exact check decides
+            return sun_sweep.in_view_many(self.camera, T_world_rgb, points, s.view_margin,
+                                          tolerance=1e-6)
         ok &= seen(spots[:, None, :])[0]
         if not s.need_marker:
             return ok
         corners = sun_sweep.marker_corners(s.marker_side)
-        in_image, pixels = seen(np.broadcast_to(corners, (len(centres), 4, 3)))
+        in_image, pixels = seen(corners)
         ok &= in_image
+        origin = T_world_rgb[:, :3, 3]
         to_camera = origin / np.linalg.norm(origin, axis=1)[:, None]     # marker at origin
         ok &= np.arccos(np.clip(to_camera[:, 2], -1.0, 1.0)) <= _SEES['max_view_angle'] + 1e-9
         sides = np.linalg.norm(pixels - np.roll(pixels, 1, axis=1), axis=2)

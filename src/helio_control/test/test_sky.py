@@ -25,7 +25,7 @@ HEADING = 200.0                          # its hidden robot_heading_deg
 DAY = datetime.date(2026, 6, 21)
 CEST = datetime.timezone(datetime.timedelta(hours=2))
 UTC = datetime.timezone.utc
-# a rig unlike the default in every offset the transcriptions use: the lens off the pitch
+# a rig unlike the default in every offset the vectorised model uses: the lens off the pitch
 # axis, the yaw axis off the flange's x axis, the marker turned, narrower servos
 OTHER_RIG = Rig(RigParameters(lens_offset=(0.004, -0.003, -0.012),
                               yaw_axis_offset=(0.028, 0.006, -0.045),
