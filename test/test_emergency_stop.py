@@ -5,8 +5,8 @@ Issue 30, item 2. ``emergency_stop`` (std_srvs/Trigger, the servo driver's) is c
 the painter heats a dot, each node in its own process as a user runs them. Judged by the
 world's truth (``sim/truth/light``, the peak irradiance on the panel): the focus is off the
 wood within 0.3 s of simulated time of the call, and no char grows after. The painting ends
-saying why, and every goal is refused naming the stop (the painter's, the arm's, the
-wrist's) until ``helio reset`` (the command, in its own process) releases it; the arm then
+saying why, and every goal is refused naming the stop (the painter's, the lens planner's,
+the arm's, the wrist's) until ``helio reset`` (the command, in its own process) releases it; the arm then
 moves again.
 """
 
@@ -15,7 +15,7 @@ import subprocess
 import sys
 
 from conftest import graph_of_processes
-from helio_msgs.action import MoveArm, MoveWrist, PaintPattern
+from helio_msgs.action import FocusLens, MoveArm, MoveWrist, PaintPattern
 from std_srvs.srv import Trigger
 from test_painter_safety import dots_along, NODES, one_graph_overrides, painting_interrupted
 from test_painter_safety import Rig
@@ -60,6 +60,8 @@ def test_the_emergency_stop_takes_the_focus_off_and_refuses_goals_until_reset(tm
                                                   target=target), timeout=ANSWER_TIMEOUT),
                  graph.run_goal(wrist, MoveWrist.Goal(yaw=0.0, pitch=0.1),
                                 timeout=ANSWER_TIMEOUT)]
+        focus = graph.action_client(FocusLens, 'focus', ANSWER_TIMEOUT)
+        moves.append(graph.run_goal(focus, FocusLens.Goal(), timeout=ANSWER_TIMEOUT))
         for reply in (refused, *moves):
             assert not reply.result.success
             assert 'EMERGENCY STOP is engaged' in reply.result.message, reply.result.message

@@ -20,7 +20,7 @@ import math
 import time
 
 from conftest import graph_of_processes, wait_for_devices
-from geometry_msgs.msg import PointStamped, PoseStamped, Vector3Stamped
+from geometry_msgs.msg import Point, PointStamped, PoseStamped, Vector3Stamped
 from helio_msgs.action import CalibrateFocus, CalibrateWorld, FocusLens, SweepSun
 from helio_optics.node_kit.conversions import point_to_array, pose_to_matrix
 from helio_optics.node_kit.conversions import stamp_to_seconds
@@ -141,6 +141,12 @@ def test_goals_that_cannot_be_served_are_refused_with_the_reason(planner):
     goal.travel_d_lp = 0.09                  # 0.8 cm from the heating distance: a burn trail
     response = planner.run(FocusLens, 'focus', goal)
     assert not response.result.success and 'safe_margin' in response.result.message
+    # a focal sweep's non-finite numbers are refused before anything else is asked of it
+    for bad in (CalibrateFocus.Goal(step=math.inf), CalibrateFocus.Goal(d_min=math.nan),
+                CalibrateFocus.Goal(target=Point(x=math.inf))):
+        response = planner.run(CalibrateFocus, 'calibrate_focus', bad)
+        assert not response.result.success
+        assert 'every number must be finite' in response.result.message, response.result.message
 
 
 def test_world_calibration_recovers_the_true_transform(planner):

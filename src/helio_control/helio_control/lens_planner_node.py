@@ -52,12 +52,14 @@ from helio_optics.ephemeris import sun_position
 from helio_optics.focal_calibration import calibrate_focus
 from helio_optics.focus_targeting import FocusTargeting
 from helio_optics.geometry import transform_points
+from helio_optics.node_kit import emergency_stop
 from helio_optics.node_kit.awaitables import discovered, FirstOf, sleep, within
 from helio_optics.node_kit.conversions import array_to_point, camera_from_info
 from helio_optics.node_kit.conversions import matrix_to_pose, point_to_array, pose_to_matrix
 from helio_optics.node_kit.conversions import stamp_from_seconds, stamp_to_seconds
 from helio_optics.node_kit.deployment import declare_lens, declare_rig, declare_site
 from helio_optics.node_kit.deployment import follow_world_calibration
+from helio_optics.node_kit.emergency_stop import EmergencyStopListener
 from helio_optics.node_kit.joint_states import JointStateBuffer
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
@@ -256,6 +258,9 @@ class LensPlannerNode(Node):
         self.arm = ActionClient(self, MoveArm, 'move_arm')
         self.wrist = ActionClient(self, MoveWrist, 'move_wrist')
         self.estimator = self.create_client(EstimateSun, 'estimate_sun')
+        # the emergency stop (node_kit.emergency_stop): goals refused until the reset; one
+        # that runs ends when the drivers abort its moves
+        self.emergency = EmergencyStopListener(self)
         for action_type, name, execute in (
                 (FocusLens, 'focus', self._execute_focus),
                 (CalibrateWorld, 'calibrate_world', self._execute_calibrate_world),
@@ -412,8 +417,11 @@ class LensPlannerNode(Node):
         """Wrap a procedure: one goal at a time, failures and cancels become results."""
         async def run(goal_handle):
             result = action_type.Result()
-            if self._busy:
-                result.success, result.message = False, 'busy: another lens_planner goal runs'
+            if self._busy or self.emergency.engaged:
+                result.success = False
+                result.message = (emergency_stop.refusal(f'{action_type.__name__} goal')
+                                  if self.emergency.engaged
+                                  else 'busy: another lens_planner goal runs')
                 goal_handle.abort()
                 return result
             self._busy = True
@@ -791,15 +799,18 @@ class LensPlannerNode(Node):
 
     async def _execute_calibrate_focus(self, goal_handle, result):
         request = goal_handle.request
-        sun = self._sun_ray()
-        camera = await self._need_camera()
         d_min = request.d_min or self.focus_sweep[0]
         d_max = request.d_max or self.focus_sweep[1]
         step = request.step or self.focus_sweep[2]
+        target = point_to_array(request.target)
+        if not all(math.isfinite(v) for v in (d_min, d_max, step, *target)):
+            raise GoalFailed(f'bad sweep: every number must be finite: d_min {d_min}, d_max '
+                             f'{d_max}, step {step} m, target {target.tolist()}')
         if not (0.0 < d_min < d_max and step > 0.0 and (d_max - d_min) / step < 1000):
             raise GoalFailed(f'bad sweep: d_min {d_min}, d_max {d_max}, step {step} m')
         distances = np.round(np.arange(d_min, d_max + 0.5 * step, step), 6)
-        target = point_to_array(request.target)
+        sun = self._sun_ray()
+        camera = await self._need_camera()
         T_robot_world = self.rig.parameters.T_robot_world
         if not np.any(target):
             target = self._focus_target(sun, camera, distances)
