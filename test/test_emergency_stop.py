@@ -6,8 +6,8 @@ the painter heats a dot, each node in its own process as a user runs them. Judge
 world's truth (``sim/truth/light``, the peak irradiance on the panel): the focus is off the
 wood within 0.3 s of simulated time of the call, and no char grows after. The painting ends
 saying why, and every goal is refused naming the stop (the painter's, the lens planner's,
-the arm's, the wrist's) until ``helio reset`` (the command, in its own process) releases it; the arm then
-moves again.
+the arm's, the wrist's) until ``helio reset`` (the command, in its own process) releases
+it; the arm then moves again.
 """
 
 import math
