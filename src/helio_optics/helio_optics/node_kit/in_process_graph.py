@@ -32,6 +32,10 @@ TRANSIENT_LOCAL_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABL
                                  durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
+# a goal request unanswered this long is sent again (``send_goal``) [s]
+GOAL_RESEND_AFTER = 10.0
+
+
 class GraphTimeout(AssertionError):
     """Something the test waited for did not happen in time (fails the test)."""
 
@@ -204,10 +208,28 @@ class InProcessGraph:
         future = self.result_of(task, timeout, f'{what} to be sent')
         return self.result_of(future, timeout, what)
 
-    def send_goal(self, client, goal, feedback=None, timeout=DEFAULT_TIMEOUT):
-        """Send `goal`; return its ClientGoalHandle (accepted or not: check ``accepted``)."""
-        return self.on_executor(lambda: client.send_goal_async(goal, feedback_callback=feedback),
-                                timeout, 'the goal response')
+    def send_goal(self, client, goal, feedback=None, timeout=DEFAULT_TIMEOUT,
+                  resend_after=GOAL_RESEND_AFTER):
+        """
+        Send `goal`; return its ClientGoalHandle (accepted or not: check ``accepted``).
+
+        A goal request written before the server's request reader has matched this client's
+        writer is lost: DDS hands a volatile sample only to the readers matched when it is
+        written, and ``server_is_ready`` sees the server in the graph before that. Seen as a
+        goal response that never came (the word test waited 15 minutes, twice, 2026-11-27).
+        Unanswered, the goal is sent again, with a new goal id, every `resend_after` s
+        until `timeout`.
+        """
+        deadline = time.monotonic() + timeout
+        while True:
+            wait = max(min(resend_after, deadline - time.monotonic()), 0.0)
+            try:
+                return self.on_executor(
+                    lambda: client.send_goal_async(goal, feedback_callback=feedback), wait,
+                    'the goal response')
+            except GraphTimeout:
+                if time.monotonic() >= deadline:
+                    raise
 
     def goal_result(self, handle, timeout=DEFAULT_TIMEOUT):
         """Wait for an accepted goal's GetResult response (``.status``, ``.result``)."""
