@@ -200,6 +200,9 @@ class MarkerConfig:
     # (docs/measurements/2026-11-27-marker-view-angle.md: 0.15 mm at 60 deg, 6 mm at 80 deg)
     max_view_angle_deg: float = 60.0
     roi_margin: float = 0.5          # ROI around the last corners, as a fraction of their size
+    # re-detect first in that ROI (False: always in the whole frame, each image's pose then
+    # depends on that image alone, as a replay that skips images needs)
+    roi_search: bool = True
     joint_tolerance: float = 1e-4    # joints closer than this count as unchanged [rad]
     max_pose_age: float = 0.0        # re-detect after this long even if still [s] (0: never)
     # a marker not found with the joints still is searched for again only this often: a
@@ -207,6 +210,9 @@ class MarkerConfig:
     # frame)
     miss_retry_period: float = 1.0
     refine_edges: bool = True        # corners from lines fitted to the marker's outer edges
+    # the fine edge fit is repeated until its corners move less than 0.001 px, at most this
+    # often: the result then does not depend on where the search started (ROI or frame)
+    max_fine_passes: int = 8
     detect_max_width: int = 640      # wider images are downscaled for detection [px] (0: never)
     roi_side_pixels: int = 120       # ROI re-detection scales the marker to about this [px]
     response: str = 'srgb'           # the camera's tone curve: 'srgb' (webcams) or 'linear'
@@ -228,6 +234,8 @@ class MarkerConfig:
                              f'{self.shadow_levels}')
         if not self.max_edge_residual > 0.0:
             raise ValueError(f'max_edge_residual must be > 0 px, got {self.max_edge_residual}')
+        if self.max_fine_passes < 1:
+            raise ValueError(f'max_fine_passes must be >= 1, got {self.max_fine_passes}')
 
 
 class MarkerDetector:
@@ -372,7 +380,10 @@ class MarkerDetector:
         with the marker (8 % of its shortest side, 2-8 px).
         """
         side = float(np.min(np.linalg.norm(corners - np.roll(corners, 1, axis=0), axis=1)))
-        fine = float(np.clip(0.08 * side, 2.0, 8.0))   # within the border cell, 1/6 side
+        # within the border cell (1/6 side); in half pixels: the fit's fixed point moves by
+        # up to 0.05 px with the reach (the profiles' sample grid), so a reach that followed
+        # the start's size exactly would make the result depend on where the search began
+        fine = float(np.clip(np.round(0.16 * side) / 2.0, 2.0, 8.0))
         coarse = max(fine, min(max(4.0, 2.5 / scale), 0.125 * side))
         for _ in range(3):   # wide passes until the corners settle (each re-centres the reach)
             nearer = refine_corners_from_edges(
@@ -384,8 +395,20 @@ class MarkerDetector:
             corners = nearer.corners
             if moved < 0.5:
                 break
-        return refine_corners_from_edges(gray, corners, camera, reach=fine,
-                                         to_linear=self._to_linear)
+        fit = refine_corners_from_edges(gray, corners, camera, reach=fine,
+                                        to_linear=self._to_linear)
+        # the fine pass again until it is a fixed point: one pass moves a corner by up to
+        # 0.3 px on a slanted marker's short, blurred edges, then a few thousandths
+        for _ in range(self.config.max_fine_passes - 1):
+            again = refine_corners_from_edges(gray, fit.corners, camera, reach=fine,
+                                              to_linear=self._to_linear)
+            if again.contrast <= 0:
+                break
+            moved = float(np.max(np.linalg.norm(again.corners - fit.corners, axis=1)))
+            fit = again
+            if moved < 1e-3:
+                break
+        return fit
 
     def pose_from_corners(self, pixels, camera, stamp=0.0):
         """Solve the camera pose from the 4 marker corners (IPPE square) and check it."""
@@ -700,7 +723,7 @@ class MarkerPoseTracker:
                 return MarkerResult(reason=reason, searched='cache')
             self.last_miss = None
         result = None
-        if self.last is not None:
+        if self.last is not None and config.roi_search:
             roi = self._roi(gray.shape)
             if roi is not None:
                 result = self.detector.detect(gray, camera, stamp, roi)

@@ -81,6 +81,10 @@ class SpotDetectorNode(Node):
             roi_margin=declare(self, 'marker.roi_margin', 0.5,
                                'Re-detection ROI around the last corners, as a fraction of '
                                'their extent [-].', 0.0, 10.0),
+            roi_search=declare(self, 'marker.roi_search', True,
+                               'Re-detect the marker first in that ROI (false: always in the '
+                               'whole frame, so that each pose depends on its own image '
+                               'alone, as a replay that skips images needs).'),
             joint_tolerance=declare(self, 'marker.joint_tolerance', 1e-4,
                                     'Joint change below which the camera counts as still and '
                                     'the marker pose is reused [rad].', 0.0, 1.0),
