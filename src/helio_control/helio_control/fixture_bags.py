@@ -51,18 +51,31 @@ WORLD = {'real_time_factor': 3.0, 'flux_rays': 20000}
 DRIVERS = {'joint_state_rate': 60.0}
 # The spot detector re-detects the marker in every image (by default it reuses a pose while
 # the joints stand still, and a marker not found while they stand still is searched again
-# only once a second): each recorded spot then rests on its own recorded image, and the
-# replay (with these parameters) can be compared image by image. The fixture aims the lens
+# only once a second), each time in the whole frame (by default first in a window around
+# the last corners, which the replay, seeing one image in 25, places elsewhere): each
+# recorded spot then rests on its own recorded image alone, and the replay (with these
+# parameters) can be compared image by image. The fixture aims the lens
 # without a robot-world calibration, so the detector has no kinematic camera pose, and
 # while it holds the dot the camera sees the marker 79 deg off its normal, beyond the
 # detector's default limit (60 deg): the fixture keeps the marker's pose there.
 PERCEPTION = {'spot_detector': {'marker.max_pose_age': 0.001, 'marker.miss_retry_period': 0.0,
-                                'marker.max_view_angle_deg': 90.0}}
+                                'marker.roi_search': False, 'marker.max_view_angle_deg': 90.0}}
 RECORDING = {'camera_decimation': 8,
              'topic_decimation': ['/rgb/image_raw=25', '/rgb/camera_info=1',
                                   '/thermal/camera_info=1'],
              'exclude': ['/parameter_events', '/rosout', '/sim/canvas']}
 TIMEOUT = 180.0
+# topics a fixture is worthless without: the recorder subscribes as it discovers topics
+# (every 0.5 s), so the lens waits until it listens to all of them
+NEEDED = ('/clock', '/joint_states', '/rgb/image_raw', '/thermal/image_raw', '/spot',
+          '/thermal/stats')
+
+
+def recorder_listens(graph, topics):
+    """Tell whether the node named ``recorder`` subscribes to every topic of `topics`."""
+    return all(any(info.node_name == 'recorder'
+                   for info in graph.helper.get_subscriptions_info_by_topic(topic))
+               for topic in topics)
 
 
 def move_joints(graph, arm, wrist, x, timeout):
@@ -151,6 +164,8 @@ def record_fixture(name, out_dir, work_dir):
             client = FixtureClient(graph, rig)
             recorder = Recorder(bag, use_sim_time=True, log_dir=logs, chunk_period=1.0,
                                 **RECORDING).start()
+            graph.wait_until(lambda: recorder_listens(graph, NEEDED), TIMEOUT,
+                             f'the recorder subscribing to {", ".join(NEEDED)}')
             try:
                 for dot in spec['dots']:
                     client.move(client.focus_joints(dot, D_LP + RETREAT))
