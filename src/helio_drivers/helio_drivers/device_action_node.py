@@ -470,13 +470,17 @@ class DeviceActionNode(Node):
             return
         done = []
         run = self._run
+        stopped_already = False
         if run is not None:
+            # a job that may have moved the device is stopped (and the stop confirmed) here
+            stopped_already = run.started
             self._stop_and_answer(run, 'abort', f'EMERGENCY STOP: {run.what} aborted')
             done.append(f'{run.what} aborted')
         if self.client.connected:
             try:
-                _, stopped = self.stop_device()
-                done.append(stopped)
+                if not stopped_already:         # one stop, not two, before the escape
+                    _, stopped = self.stop_device()
+                    done.append(stopped)
                 done.append(self.emergency_move())
             except DeviceError as error:
                 done.append(f'the {self.spec.label} could NOT be stopped: {error}')

@@ -80,6 +80,8 @@ def joint_limits_problem(values, highest):
 class DobotDriverNode(DeviceActionNode):
     """Serial driver of the Dobot Magician; see the module docstring."""
 
+    _dropped_said = 0      # impossible pose replies the status note last said (device thread)
+
     def __init__(self, **kwargs):
         """Declare parameters, create the interfaces and start the device thread."""
         super().__init__('dobot_driver', SPEC, MoveArm, DobotClient, **kwargs)
@@ -157,7 +159,8 @@ class DobotDriverNode(DeviceActionNode):
         """Return the joint names and j1..j4 [rad]; impossible poses are said on dobot/status."""
         _, joints = pose_to_si(self.client.get_pose())
         dropped = self.client.impossible_replies
-        if dropped:
+        if dropped != self._dropped_said:       # a new note only when the count changed
+            self._dropped_said = dropped
             self.setup_notes['replies'] = (
                 f'dropped {dropped} pose replies no Dobot can send (values out of range '
                 'behind a valid checksum): noise on the line?')

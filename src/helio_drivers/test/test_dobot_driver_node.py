@@ -385,3 +385,17 @@ def test_a_second_driver_process_exits_at_once_naming_the_holder(tmp_path):
             assert first.alive()
         finally:
             first.stop()
+
+
+def test_pose_replies_no_dobot_can_send_are_dropped_and_said_on_the_status(graph):
+    # issue 35: one random frame in 256 passes the checksum; a forged pose reply (random
+    # values) must not reach /joint_states, and dobot/status says how many were dropped
+    emulator, graph = graph
+    assert graph.move(MoveArm.Goal.MOVJ_ANGLE, (0.1, 0.4, 0.3, 0.0)).result.success
+    heard = len(graph.joint_states.messages)
+    emulator.forge_replies(proto.CommandId.GET_POSE, count=3)
+    assert graph.wait_status(lambda s: 'dropped 3 pose replies no Dobot can send' in s.message)
+    graph.joint_states.wait_for_count(heard + 10)
+    for message in graph.joint_states.messages[heard:]:
+        assert list(message.position) == pytest.approx([0.1, 0.4, 0.3, 0.0], abs=1e-4)
+    assert graph.driver.client.impossible_replies == 3
