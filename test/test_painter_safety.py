@@ -13,6 +13,9 @@ and ``sim/canvas``: the char map), never by what the painter says about itself:
 - the painter killed (SIGKILL) mid-painting: the lens planner's focus lease puts the focus
   off the wood within the lease (1 s) plus 0.5 s, and the same goal sent again to a new
   painter completes the picture with no dot lost and none burnt twice;
+- a driver killed (SIGKILL) mid-dot: the painter hears its joint states stop and retreats
+  with the other device (a dead Dobot driver: the wrist turns the lens away; a dead servo
+  driver: the arm alone lifts the lens straight up, issue 30);
 - the lens planner killed (SIGKILL) mid-dot, then the painting cancelled (as the graph's
   stop does): the painter's retreat is not accepted by the dead planner, and the wrist turns
   the lens away within 0.5 s (issue 30: the painter used to wait 60 s for the planner).
@@ -64,9 +67,9 @@ EVENT_PACE = 0.5              # the world's real-time factor around each event (
 ENDED = (GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED)
 
 
-def dots_along(y, count):
-    """Return `count` world points along x at height y [m]."""
-    return [Point(x=0.05 + i * PITCH, y=y, z=0.0) for i in range(count)]
+def dots_along(y, count, x=0.05):
+    """Return `count` world points along x from `x` at height y [m]."""
+    return [Point(x=x + i * PITCH, y=y, z=0.0) for i in range(count)]
 
 
 class Rig:
@@ -82,6 +85,7 @@ class Rig:
                                    QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE))
         self.stats = graph.collect(ThermalStats, 'thermal/stats', QoSProfile(depth=50))
         self.dobot = graph.collect(DeviceStatus, 'dobot/status', TRANSIENT_LOCAL_QOS)
+        self.servo = graph.collect(DeviceStatus, 'servo/status', TRANSIENT_LOCAL_QOS)
         self.joints = graph.collect(JointState, 'joint_states', QoSProfile(depth=50))
         self.canvas = graph.collect(Image, 'sim/canvas', QoSProfile(depth=1))
         self.client = graph.action_client(PaintPattern, 'paint', 120.0)
@@ -184,7 +188,8 @@ def rig(tmp_path_factory):
                  'lens_planner': {'calibration_dir': str(tmp_path / 'calibration')},
                  'painter': {'runs_dir': str(tmp_path / 'runs')}}
     with graph_of_processes(tmp_path, NODES, overrides,
-                            may_die=('painter', 'lens_planner')) as (group, graph):
+                            may_die=('painter', 'lens_planner', 'dobot_driver',
+                                     'servo_driver')) as (group, graph):
         yield Rig(group, graph, tmp_path / 'runs')
 
 
@@ -254,16 +259,16 @@ def test_a_30_s_cloud_mid_dot_is_waited_out_and_the_dot_finished_to_its_target(r
     assert diameters[0] == pytest.approx(diameters[1], rel=0.15)
 
 
-def painting_interrupted(rig, name, y, interrupt, restore=lambda: None, dots=1):
+def painting_interrupted(rig, name, y, interrupt, restore=lambda: None, dots=1, x=0.05):
     """
     Interrupt a painting while its first dot heats; return (focus-off delay [s sim], handle).
 
-    The painting is `dots` dots at height `y` [m], interrupted at EVENT_PACE.
+    The painting is `dots` dots from `x` at height `y` [m], interrupted at EVENT_PACE.
     `interrupt(handle)` does it and returns the simulated time it counts from; `restore`
     undoes the interruption's cause before the world runs fast again.
     """
     on_feedback, heating = rig.heating(index=0, n_p=5)
-    handle = rig.send(dots_along(y, dots), name, on_feedback=on_feedback)
+    handle = rig.send(dots_along(y, dots, x), name, on_feedback=on_feedback)
     rig.wait(heating, f'{name}: dot 0 heating', handle)
     rig.set_world(real_time_factor=EVENT_PACE)      # the graph's reaction, not the pace
     try:
@@ -400,6 +405,54 @@ def test_a_killed_painter_resumes_with_no_dot_lost_or_burnt_twice(rig):
     row = [d for d in charred if abs(d.y - 0.11) < 2e-3]
     assert len(row) == 4, f'{len(row)} charred dots on the row, 4 planned'
     print('resume: diameters ' + ', '.join(f'{d.diameter * 1e3:.2f}' for d in found) + ' mm')
+
+
+def killed_driver(rig, label, y):
+    """
+    SIGKILL `label` while a dot heats at (0.074, y); start it again; return (delay, result).
+
+    A killed driver says nothing: the painter hears its joint states stop (``device_silence``
+    of wall time) and retreats with the other device. Meanwhile the world, in lockstep with
+    the drivers' joint states, holds its time until it leaves the silent driver behind
+    (``lockstep_timeout``): measured 0.30 s (Dobot) and 0.40 s (servos) of simulated time.
+    """
+    driver = rig.process(label)
+    device = 'dobot' if label == 'dobot_driver' else 'servo'
+    statuses = rig.dobot if device == 'dobot' else rig.servo
+
+    def kill(_handle):
+        driver.signal(signal.SIGKILL)
+        driver.process.wait(30.0)
+        return rig.now()
+
+    def restart():
+        heard, joints = len(statuses.messages), len(rig.joints.messages)
+        driver.start()
+        statuses.wait_until(lambda m: len(m) > heard and m[-1].connected, 120.0,
+                            f'the {device} driver connected again')
+        name = 'dobot_j1' if device == 'dobot' else 'lens_yaw'
+        rig.joints.wait_until(lambda m: any(name in j.name for j in m[joints:]), 60.0,
+                              f"the {device}'s joint states again")
+
+    delay, handle = painting_interrupted(rig, f'{device}_killed', y, kill, restart, x=0.074)
+    result = rig.graph.goal_result(handle, TIMEOUT).result
+    print(f'{label} killed: {result.message}')
+    assert not result.success and f'{device} silent' in result.message
+    return delay, result
+
+
+def test_a_killed_dobot_driver_leaves_the_retreat_to_the_wrist(rig):
+    delay, result = killed_driver(rig, 'dobot_driver', 0.09)
+    assert 'the wrist turned the lens away' in result.message
+    assert delay <= OFF_BOUND
+
+
+def test_a_killed_servo_driver_leaves_the_retreat_to_the_arm_alone(rig):
+    # issue 30: the retreat went to the lens planner, whose focus moves the wrist too, then
+    # to the wrist itself: both through the dead driver. The arm now lifts the lens alone
+    delay, result = killed_driver(rig, 'servo_driver', 0.10)
+    assert 'the arm lifted the lens' in result.message
+    assert delay <= OFF_BOUND
 
 
 def test_a_killed_lens_planner_leaves_the_retreat_to_the_wrist_within_half_a_second(rig):

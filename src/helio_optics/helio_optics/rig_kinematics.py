@@ -64,7 +64,7 @@ BEHIND_BASE_AXIS = -5     # the flange would stand behind the base axis
 HEADING_MISMATCH = -6     # the arm's base joint disagrees with the rig's (numerical guard)
 
 __all__ = ['JOINT_NAMES', 'LensTarget', 'LensTargets', 'Rig', 'RigParameters', 'RigPose',
-           'RigSolutions', 'UnreachableError', 'camera_mount', 'default_rig_file',
+           'RigSolutions', 'UnreachableError', 'camera_mount', 'default_rig_file', 'escape_lift',
            'load_rig_parameters']
 
 
@@ -170,6 +170,28 @@ def escape_pitch(pitch, turn):
     at 0.6 rad), whatever the sun, which neither knows for sure then.
     """
     return pitch - turn if pitch > 0.0 else pitch + turn
+
+
+def escape_lift(arm, joints, lift, tries=4):
+    """
+    Return the arm joints (j1, j2, j3) [rad] that put the flange `lift` [m] straight above.
+
+    The painter's retreat when the wrist cannot move (its driver dead or faulted): j1 stays
+    and the Magician's linkage keeps the flange level, so the lens keeps its orientation and
+    moves straight up, and the focus leaves the wood by the lift (3 cm spreads the spot over
+    about a third of the lens' width, as the retreat along the sun ray does). `arm` is a
+    DobotArm, `joints` its present j1..j3. The largest of `lift`, `lift` / 2, ... (`tries`
+    halvings) within the joints' limits; UnreachableError naming the joint when none is.
+    """
+    flange = arm.forward(joints)
+    error = None
+    for attempt in range(tries):
+        try:
+            return arm.inverse(flange + [0.0, 0.0, lift / 2 ** attempt])
+        except UnreachableError as failure:
+            error = failure
+    raise UnreachableError(f'no lift of the flange within {lift * 1000:.0f} mm: {error}',
+                           joint=error.joint, excess=error.excess)
 
 
 def default_rig_file():

@@ -3,8 +3,9 @@
 import math
 import os
 
+from helio_optics.arm_kinematics import DobotArm
 from helio_optics.geometry import direction_from_angles, transform_points
-from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters, Rig
+from helio_optics.rig_kinematics import default_rig_file, escape_lift, load_rig_parameters, Rig
 from helio_optics.rig_kinematics import RigParameters
 from helio_optics.rig_kinematics import UnreachableError
 import numpy as np
@@ -189,3 +190,26 @@ def test_many_poses_at_once_are_the_poses_one_at_a_time():
     for index in range(5):
         assert (yaw[index], pitch[index]) == pytest.approx(
             rig.yaw_pitch_for_axis(-sun, yaws[index]), abs=1e-12)
+
+
+def test_the_escape_lift_raises_the_flange_straight_up_keeping_the_lens_orientation():
+    # the painter's retreat with a dead wrist: the flange `lift` straight above, j1 kept
+    # (the flange stays level, so the lens keeps its orientation); truth: forward kinematics
+    arm = DobotArm()
+    joints = arm.inverse([0.20, 0.05, 0.02])
+    lifted = escape_lift(arm, joints, 0.03)
+    assert lifted[0] == pytest.approx(joints[0], abs=1e-12)
+    assert arm.forward(lifted) - arm.forward(joints) == pytest.approx([0.0, 0.0, 0.03],
+                                                                      abs=1e-9)
+    # 2 cm below the top of the reach at 26 cm (14.8 cm high): 3 cm is refused by a joint
+    # limit, 1.5 cm is the largest halving the joints allow
+    high = arm.inverse([0.26, 0.0, 0.128])
+    with pytest.raises(UnreachableError):
+        arm.inverse(arm.forward(high) + [0.0, 0.0, 0.03])
+    lifted = escape_lift(arm, high, 0.03)
+    assert arm.forward(lifted) - arm.forward(high) == pytest.approx([0.0, 0.0, 0.015],
+                                                                    abs=1e-9)
+    # at the top: not even 0.4 mm (three halvings) up
+    top = arm.inverse([0.26, 0.0, 0.1479])
+    with pytest.raises(UnreachableError, match='no lift of the flange within 30 mm'):
+        escape_lift(arm, top, 0.03)
