@@ -147,6 +147,13 @@ class LensPlannerNode(Node):
             self, 'server_timeout', 30.0,
             'Wait at most this long for the driver actions and estimate_sun to be discovered '
             '(wall clock) [s].', 0.1, 600.0)
+        self.sun_wait = declare(
+            self, 'sun_wait', 5.0,
+            'For this long after the start, a focus goal that finds no sun estimate yet waits '
+            "for one (a lens planner started after the sweep: the sun estimator's latched "
+            'estimate comes once the two have discovered each other) (wall clock) [s].',
+            0.0, 60.0)
+        self._started = time.monotonic()
         self.joint_state_max_age = declare(
             self, 'joint_state_max_age', 5.0,
             'The present joints must be younger than this (node clock) [s], unless their '
@@ -570,6 +577,13 @@ class LensPlannerNode(Node):
             raise GoalFailed(f'travel_d_lp {goal.travel_d_lp} m: the focus may move sideways '
                              f'only {self.safe_margin * 100:.1f} cm or more from the heating '
                              f'distance {self.heating_distance * 100:.1f} cm (safe_margin)')
+        waited = time.monotonic() - self._started
+        if self.sun is None and waited < self.sun_wait:
+            try:            # just started (after a sweep?): a latched estimate may be on its way
+                await discovered(self, lambda: self.sun is not None, self.sun_wait - waited,
+                                 'the sun estimate')
+            except TimeoutError:
+                pass        # _sun_ray says why
         alive = self.lease.alive(self._now(), time.monotonic())   # a client to outlive?
         legs, x_now = self._plan_focus(target, d_lp, travel)
         solution = self.targeting.aim(target, self._sun_ray(), d_lp,
