@@ -147,12 +147,12 @@ class LensPlannerNode(Node):
             self, 'server_timeout', 30.0,
             'Wait at most this long for the driver actions and estimate_sun to be discovered '
             '(wall clock) [s].', 0.1, 600.0)
-        self.sun_wait = declare(
-            self, 'sun_wait', 5.0,
-            'For this long after the start, a focus goal that finds no sun estimate yet waits '
-            "for one (a lens planner started after the sweep: the sun estimator's latched "
-            'estimate comes once the two have discovered each other) (wall clock) [s].',
-            0.0, 60.0)
+        self.startup_wait = declare(
+            self, 'startup_wait', 5.0,
+            'For this long after the start, a focus goal waits for the sun estimate and the '
+            "joint states (a lens planner started again after the sweep: the sun estimator's "
+            "latched estimate and the drivers' joint states come once the nodes have "
+            'discovered each other) (wall clock) [s].', 0.0, 60.0)
         self._started = time.monotonic()
         self.joint_state_max_age = declare(
             self, 'joint_state_max_age', 5.0,
@@ -470,6 +470,12 @@ class LensPlannerNode(Node):
                              'estimate_sun) first')
         return point_to_array(self.sun.direction)
 
+    def _inputs_heard(self):
+        """Tell whether a sun estimate and the present joints are known."""
+        return self.sun is not None and bool(self.joints.latest(
+            self._now(), self.joint_state_max_age, time.monotonic(),
+            self.joint_state_max_wall_age))
+
     def _present_joints(self):
         lookup = self.joints.latest(self._now(), self.joint_state_max_age, time.monotonic(),
                                     self.joint_state_max_wall_age)
@@ -578,12 +584,12 @@ class LensPlannerNode(Node):
                              f'only {self.safe_margin * 100:.1f} cm or more from the heating '
                              f'distance {self.heating_distance * 100:.1f} cm (safe_margin)')
         waited = time.monotonic() - self._started
-        if self.sun is None and waited < self.sun_wait:
-            try:            # just started (after a sweep?): a latched estimate may be on its way
-                await discovered(self, lambda: self.sun is not None, self.sun_wait - waited,
-                                 'the sun estimate')
+        if waited < self.startup_wait and not self._inputs_heard():
+            try:            # just started: the sun estimate and joints may be on their way
+                await discovered(self, self._inputs_heard, self.startup_wait - waited,
+                                 'the sun estimate and the joint states')
             except TimeoutError:
-                pass        # _sun_ray says why
+                pass        # _sun_ray and _present_joints say why
         alive = self.lease.alive(self._now(), time.monotonic())   # a client to outlive?
         legs, x_now = self._plan_focus(target, d_lp, travel)
         solution = self.targeting.aim(target, self._sun_ray(), d_lp,
