@@ -13,9 +13,6 @@ and ``sim/canvas``: the char map), never by what the painter says about itself:
 - the painter killed (SIGKILL) mid-painting: the lens planner's focus lease puts the focus
   off the wood within the lease (1 s) plus 0.5 s, and the same goal sent again to a new
   painter completes the picture with no dot lost and none burnt twice;
-- a driver killed (SIGKILL) mid-dot: the painter hears its joint states stop and retreats
-  with the other device (a dead Dobot driver: the wrist turns the lens away; a dead servo
-  driver: the arm alone lifts the lens straight up, issue 30);
 - the emergency stop (``emergency_stop``, std_srvs/Trigger, the servo driver's) called
   mid-dot (issue 30): the focus off the wood within 0.3 s, no char grows after, and every
   goal is refused naming the stop (the painter's, the lens planner's, the arm's, the
@@ -104,7 +101,6 @@ class Rig:
                                    QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE))
         self.stats = graph.collect(ThermalStats, 'thermal/stats', QoSProfile(depth=50))
         self.dobot = graph.collect(DeviceStatus, 'dobot/status', TRANSIENT_LOCAL_QOS)
-        self.servo = graph.collect(DeviceStatus, 'servo/status', TRANSIENT_LOCAL_QOS)
         self.joints = graph.collect(JointState, 'joint_states', QoSProfile(depth=50))
         self.canvas = graph.collect(Image, 'sim/canvas', QoSProfile(depth=1))
         self.client = graph.action_client(PaintPattern, 'paint', 120.0)
@@ -212,8 +208,7 @@ def rig(tmp_path_factory):
                  'lens_planner': {'calibration_dir': str(tmp_path / 'calibration')},
                  'painter': {'runs_dir': str(tmp_path / 'runs')}}
     with graph_of_processes(tmp_path, NODES, overrides,
-                            may_die=('painter', 'lens_planner', 'dobot_driver',
-                                     'servo_driver')) as (group, graph):
+                            may_die=('painter', 'lens_planner')) as (group, graph):
         yield Rig(group, graph, tmp_path / 'runs')
 
 
@@ -429,54 +424,6 @@ def test_a_killed_painter_resumes_with_no_dot_lost_or_burnt_twice(rig):
     row = [d for d in charred if abs(d.y - 0.11) < 2e-3]
     assert len(row) == 4, f'{len(row)} charred dots on the row, 4 planned'
     print('resume: diameters ' + ', '.join(f'{d.diameter * 1e3:.2f}' for d in found) + ' mm')
-
-
-def killed_driver(rig, label, y):
-    """
-    SIGKILL `label` while a dot heats at (0.074, y); start it again; return (delay, result).
-
-    A killed driver says nothing: the painter hears its joint states stop (``device_silence``
-    of wall time) and retreats with the other device. Meanwhile the world, in lockstep with
-    the drivers' joint states, holds its time until it leaves the silent driver behind
-    (``lockstep_timeout``): measured 0.30 s (Dobot) and 0.40 s (servos) of simulated time.
-    """
-    driver = rig.process(label)
-    device = 'dobot' if label == 'dobot_driver' else 'servo'
-    statuses = rig.dobot if device == 'dobot' else rig.servo
-
-    def kill(_handle):
-        driver.signal(signal.SIGKILL)
-        driver.process.wait(30.0)
-        return rig.now()
-
-    def restart():
-        heard, joints = len(statuses.messages), len(rig.joints.messages)
-        driver.start()
-        statuses.wait_until(lambda m: len(m) > heard and m[-1].connected, 120.0,
-                            f'the {device} driver connected again')
-        name = 'dobot_j1' if device == 'dobot' else 'lens_yaw'
-        rig.joints.wait_until(lambda m: any(name in j.name for j in m[joints:]), 60.0,
-                              f"the {device}'s joint states again")
-
-    delay, handle = painting_interrupted(rig, f'{device}_killed', y, kill, restart, x=0.074)
-    result = rig.graph.goal_result(handle, TIMEOUT).result
-    print(f'{label} killed: {result.message}')
-    assert not result.success and f'{device} silent' in result.message
-    return delay, result
-
-
-def test_a_killed_dobot_driver_leaves_the_retreat_to_the_wrist(rig):
-    delay, result = killed_driver(rig, 'dobot_driver', 0.09)
-    assert 'the wrist turned the lens away' in result.message
-    assert delay <= OFF_BOUND
-
-
-def test_a_killed_servo_driver_leaves_the_retreat_to_the_arm_alone(rig):
-    # issue 30: the retreat went to the lens planner, whose focus moves the wrist too, then
-    # to the wrist itself: both through the dead driver. The arm now lifts the lens alone
-    delay, result = killed_driver(rig, 'servo_driver', 0.10)
-    assert 'the arm lifted the lens' in result.message
-    assert delay <= OFF_BOUND
 
 
 def test_the_emergency_stop_takes_the_focus_off_and_refuses_goals_until_reset(rig):
