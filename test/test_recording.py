@@ -19,7 +19,7 @@ import sys
 from conftest import graph_of_processes, wait_for_devices
 from helio_control.bag_files import bag_file, is_complete, salvage_records
 from helio_control.bringup import node_environment
-from helio_control.recorder import Recorder
+from helio_control.recorder import Recorder, recorder_subscribed
 from helio_msgs.msg import ThermalStats
 from helio_optics.node_kit.conversions import stamp_to_nanoseconds
 from mcap.reader import make_reader
@@ -80,7 +80,7 @@ def record_graph(tmp_path, stats_to_wait_for, kill=False):
             # world may run far ahead of its start-up): it finds them by discovery, every
             # 0.5 s, and on a slow machine the drivers' topics showed up there 2 s after the
             # world's, as a short recording ended (3 joint_states)
-            graph.wait_until(lambda: recorder_subscribed(graph, counted), 60.0,
+            graph.wait_until(lambda: recorder_subscribed(graph.helper, counted), 60.0,
                              f'the recorder subscribing to {sorted(counted)}')
             stats.wait_for_count(len(stats.messages) + stats_to_wait_for, 120.0)
             # and until chunks are on disk: the recorder discovers topics and closes chunks on
@@ -94,13 +94,6 @@ def record_graph(tmp_path, stats_to_wait_for, kill=False):
             else:
                 recorder.stop()
     return bag, last_clock
-
-
-def recorder_subscribed(graph, topics):
-    """Tell whether the graph sees the recorder node subscribed to each of `topics`."""
-    return all(any(info.node_name == 'recorder'
-                   for info in graph.helper.get_subscriptions_info_by_topic(topic))
-               for topic in topics)
 
 
 def chunks_on_disk(bag):

@@ -27,7 +27,7 @@ import tempfile
 
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from helio_control.bringup import simulated_graph, start_graph
-from helio_control.recorder import Recorder
+from helio_control.recorder import Recorder, recorder_subscribed
 from helio_msgs.action import MoveArm, MoveWrist
 from helio_msgs.msg import DeviceStatus, ThermalStats
 from helio_optics.geometry import transform_points
@@ -69,13 +69,6 @@ TIMEOUT = 180.0
 # (every 0.5 s), so the lens waits until it listens to all of them
 NEEDED = ('/clock', '/joint_states', '/rgb/image_raw', '/thermal/image_raw', '/spot',
           '/thermal/stats')
-
-
-def recorder_listens(graph, topics):
-    """Tell whether the node named ``recorder`` subscribes to every topic of `topics`."""
-    return all(any(info.node_name == 'recorder'
-                   for info in graph.helper.get_subscriptions_info_by_topic(topic))
-               for topic in topics)
 
 
 def move_joints(graph, arm, wrist, x, timeout):
@@ -164,7 +157,7 @@ def record_fixture(name, out_dir, work_dir):
             client = FixtureClient(graph, rig)
             recorder = Recorder(bag, use_sim_time=True, log_dir=logs, chunk_period=1.0,
                                 **RECORDING).start()
-            graph.wait_until(lambda: recorder_listens(graph, NEEDED), TIMEOUT,
+            graph.wait_until(lambda: recorder_subscribed(graph.helper, NEEDED), TIMEOUT,
                              f'the recorder subscribing to {", ".join(NEEDED)}')
             try:
                 for dot in spec['dots']:

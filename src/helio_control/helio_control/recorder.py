@@ -72,12 +72,27 @@ def subscription_qos(profiles, depth=100):
                       else DurabilityPolicy.VOLATILE)
 
 
+NODE_NAME = 'recorder'
+
+
+def recorder_subscribed(node, topics):
+    """
+    Tell whether `node` sees the recorder subscribed to every topic of `topics`.
+
+    The recorder subscribes to topics as it discovers them (``discovery_period``): what a
+    recording must hold from its first message is recorded only once this holds.
+    """
+    return all(any(info.node_name == NODE_NAME
+                   for info in node.get_subscriptions_info_by_topic(topic))
+               for topic in topics)
+
+
 class RecorderNode(Node):
     """Subscribe to the graph's topics and hand their raw messages to the bag writer."""
 
     def __init__(self, **kwargs):
         """Declare the parameters, open the bag, start discovery and the writer thread."""
-        super().__init__('recorder', **kwargs)
+        super().__init__(NODE_NAME, **kwargs)
         output_dir = declare(self, 'output_dir', '', 'Bag directory to create (must not hold '
                              'a bag) [path].')
         if not output_dir:
