@@ -289,8 +289,7 @@ class PainterNode(Node):
         self.drivers = DriverSilence(self.device_silence, pause)
         self.create_timer(pause / 5.0, self._watch_drivers,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self.wrist_now = {}                # the servos' latest joint positions [rad]
-        self.arm_now = {}                  # the Dobot's latest joint positions [rad]
+        self.joints_now = {}               # every joint's latest position, by name [rad]
         self.create_subscription(JointState, 'joint_states', self._on_joints, 20)
         self.window_publisher = self.create_publisher(PointStamped, 'thermal/window', LATCHED)
         # the lens planner's focus lease (helio_control.focus_lease): while this heartbeat
@@ -354,10 +353,7 @@ class PainterNode(Node):
     def _on_joints(self, message):
         device = 'servo' if 'lens_pitch' in message.name else 'dobot'
         self.drivers.heard(device, time.monotonic())
-        if device == 'servo':
-            self.wrist_now = dict(zip(message.name, message.position))
-        else:
-            self.arm_now = dict(zip(message.name, message.position))
+        self.joints_now.update(zip(message.name, message.position))
 
     def _watch_drivers(self):
         pause = self.drivers.tick(time.monotonic())
@@ -493,8 +489,8 @@ class PainterNode(Node):
         # the arm cannot move: tilt the lens off the sun with the wrist, from where it is,
         # away from the pitch servo's nearer end (the lens axis leaves the sun ray)
         try:
-            yaw = float(self.wrist_now.get('lens_yaw', 0.0))
-            pitch = escape_pitch(float(self.wrist_now.get('lens_pitch', 0.0)), self.wrist_turn)
+            yaw = float(self.joints_now.get('lens_yaw', 0.0))
+            pitch = escape_pitch(float(self.joints_now.get('lens_pitch', 0.0)), self.wrist_turn)
             result = await self._run_action(self.wrist, 'move_wrist',
                                             MoveWrist.Goal(yaw=yaw, pitch=pitch,
                                                            escape=True), urgent=True)
@@ -515,12 +511,12 @@ class PainterNode(Node):
         """
         names = ('dobot_j1', 'dobot_j2', 'dobot_j3')
         try:
-            if not all(name in self.arm_now for name in names):
+            if not all(name in self.joints_now for name in names):
                 raise UnreachableError('no Dobot joint states heard yet', joint='')
-            joints = escape_lift(self.rig.arm, [self.arm_now[n] for n in names],
+            joints = escape_lift(self.rig.arm, [self.joints_now[n] for n in names],
                                  self.arm_lift)
             goal = MoveArm.Goal(mode=MoveArm.Goal.MOVJ_ANGLE, target=[
-                *(float(v) for v in joints), float(self.arm_now.get('dobot_j4', 0.0))])
+                *(float(v) for v in joints), float(self.joints_now.get('dobot_j4', 0.0))])
             result = await self._run_action(self.arm, 'move_arm', goal, urgent=True)
         except (UnreachableError, PaintFailed) as error:
             return f'RETREAT FAILED: {wrist_fault}; the arm could not lift the lens: {error}'
