@@ -472,13 +472,15 @@ class LensPlannerNode(Node):
 
     def _inputs_heard(self):
         """Tell whether a sun estimate and the present joints are known."""
-        return self.sun is not None and bool(self.joints.latest(
-            self._now(), self.joint_state_max_age, time.monotonic(),
-            self.joint_state_max_wall_age))
+        return self.sun is not None and bool(self._present_lookup())
+
+    def _present_lookup(self):
+        """Return the JointLookup of the present joints (fresh on either clock)."""
+        return self.joints.latest(self._now(), self.joint_state_max_age, time.monotonic(),
+                                  self.joint_state_max_wall_age)
 
     def _present_joints(self):
-        lookup = self.joints.latest(self._now(), self.joint_state_max_age, time.monotonic(),
-                                    self.joint_state_max_wall_age)
+        lookup = self._present_lookup()
         if not lookup:
             raise GoalFailed(f'the present joints are unknown: {lookup.reason}')
         return lookup.positions
