@@ -254,12 +254,8 @@ class MarkerDetector:
         parameters.minDistanceToBorder = 0
         self._detector = cv2.aruco.ArucoDetector(
             aruco_dictionary(self.config.dictionary), parameters)
-        # the shadow levels' images are black and white already: one threshold window
-        # instead of three finds the same outlines in a third of the time
-        parameters = cv2.aruco.DetectorParameters()
-        parameters.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-        parameters.minMarkerDistanceRate = 0.02
-        parameters.minDistanceToBorder = 0
+        # the shadow levels' images are black and white already: one threshold window (the
+        # detector keeps its own copy of the parameters) finds the outlines three did
         parameters.adaptiveThreshWinSizeMin = parameters.adaptiveThreshWinSizeMax = 3
         self._binary_detector = cv2.aruco.ArucoDetector(
             aruco_dictionary(self.config.dictionary), parameters)
