@@ -54,7 +54,8 @@ from helio_optics.arm_kinematics import DobotArmParameters, first_limit_failure,
 from helio_optics.arm_kinematics import JointLimit, limit_bounds, limit_error, REACHABLE
 from helio_optics.arm_kinematics import UnreachableError
 from helio_optics.config_files import config_path, read_parameter_section
-from helio_optics.geometry import homogeneous, look_at, rotation_y, rotation_z, unit
+from helio_optics.geometry import homogeneous, look_at, rotation_x, rotation_y, rotation_z
+from helio_optics.geometry import unit
 import numpy as np
 
 JOINT_NAMES = ('dobot_j1', 'dobot_j2', 'dobot_j3', 'lens_yaw', 'lens_pitch')
@@ -65,7 +66,7 @@ HEADING_MISMATCH = -6     # the arm's base joint disagrees with the rig's (numer
 
 __all__ = ['JOINT_NAMES', 'LensTarget', 'LensTargets', 'Rig', 'RigParameters', 'RigPose',
            'RigSolutions', 'UnreachableError', 'camera_mount', 'default_rig_file', 'escape_lift',
-           'load_rig_parameters']
+           'load_rig_parameters', 'mount_rotation']
 
 
 def _finite(name, value, size=None):
@@ -108,16 +109,36 @@ class RigParameters:
     #                                                 axis, below O_l [m] (d_lp default)
     world_in_robot: tuple = (0.145, -0.10, -0.14)    # marker centre in the robot frame [m]
     world_yaw: float = 0.0                          # marker x axis from the robot x [rad]
+    # what a build gets wrong (issue 28; a rig calibration measures them, the rig file's
+    # defaults are a perfect build): the true joint angle is scale * reported + offset (a
+    # Dobot's zero after homing, a servo's neutral and travel); the lens tilted in its holder
+    # (about x, then y of the pitch frame); each camera turned in its mount (Rz Ry Rx of
+    # these angles after the aim at the focus, in its optical frame)
+    joint_offsets: tuple = (0.0, 0.0, 0.0, 0.0, 0.0)     # [rad]
+    joint_scales: tuple = (1.0, 1.0, 1.0, 1.0, 1.0)      # [-]
+    lens_tilt: tuple = (0.0, 0.0)                        # [rad]
+    rgb_rotation: tuple = (0.0, 0.0, 0.0)                # [rad]
+    thermal_rotation: tuple = (0.0, 0.0, 0.0)            # [rad]
 
     @property
     def T_lens_rgb(self):  # noqa: N802 (the project's transform naming)
-        """RGB optical frame in the lens frame."""
-        return camera_mount(self.rgb_position, self.camera_focus_depth)
+        """RGB optical frame in the lens holder frame (the lens frame of a perfect build)."""
+        return camera_mount(self.rgb_position, self.camera_focus_depth) @ homogeneous(
+            mount_rotation(self.rgb_rotation))
 
     @property
     def T_lens_thermal(self):  # noqa: N802
-        """Thermal optical frame in the lens frame."""
-        return camera_mount(self.thermal_position, self.camera_focus_depth)
+        """Thermal optical frame in the lens holder frame."""
+        return camera_mount(self.thermal_position, self.camera_focus_depth) @ homogeneous(
+            mount_rotation(self.thermal_rotation))
+
+    def true_joints(self, x):
+        """Return the true joint angles (..., 5) of reported joints x: scale * x + offset."""
+        return np.asarray(x, dtype=float) * self.joint_scales + self.joint_offsets
+
+    def reported_joints(self, x_true):
+        """Return the joints the devices report (..., 5) for true angles (``true_joints``^-1)."""
+        return (np.asarray(x_true, dtype=float) - self.joint_offsets) / self.joint_scales
 
     @property
     def T_robot_world(self):  # noqa: N802
@@ -159,6 +180,12 @@ class RigParameters:
             else:
                 raise ValueError(f'unknown rig parameter {name!r}')
         return replace(cls(), arm=DobotArmParameters(**arm_values), **rig_values)
+
+
+def mount_rotation(angles):
+    """Return Rz(c) Ry(b) Rx(a) of a mount's small turn (a, b[, c]) [rad] (c = 0 if left out)."""
+    a, b, c = (tuple(float(v) for v in angles) + (0.0, 0.0, 0.0))[:3]
+    return rotation_z(c) @ rotation_y(b) @ rotation_x(a)
 
 
 def escape_pitch(pitch, turn):
@@ -272,20 +299,33 @@ class Rig:
         self._T_lens_rgb = self.parameters.T_lens_rgb
         self._T_lens_thermal = self.parameters.T_lens_thermal
         self._bounds_of = self._bounds = None
+        p = self.parameters
+        # a perfect build (the rig file's defaults) skips the build's terms
+        self._built = (any(p.joint_offsets) or any(v != 1.0 for v in p.joint_scales)
+                       or any(p.lens_tilt))
+        self._tilt = homogeneous(mount_rotation(tuple(p.lens_tilt) + (0.0,)))
 
     def forward(self, x):
-        """Return the RigPose at joints x (5 values) [rad]."""
-        x = np.asarray(x, dtype=float).reshape(5)
+        """
+        Return the RigPose at the reported joints x (5 values) [rad].
+
+        The joints are made true first (``RigParameters.true_joints``); ``yaw`` and ``pitch``
+        are the lens holder's. The lens frame is the holder's turned by ``lens_tilt``; the
+        cameras are mounted on the holder.
+        """
         p = self.parameters
+        x = p.true_joints(np.asarray(x, dtype=float).reshape(5)) if self._built \
+            else np.asarray(x, dtype=float).reshape(5)
         flange = self.arm.forward(x[:3])
         T_robot_flange = homogeneous(rotation_z(x[0]), flange)
         T_flange_yaw = homogeneous(rotation_z(x[3]), p.yaw_axis_offset)
         T_yaw_pitch = homogeneous(rotation_y(x[4]), p.pitch_axis_offset)
         T_pitch_lens = homogeneous(translation=p.lens_offset)
-        T_robot_lens = T_robot_flange @ T_flange_yaw @ T_yaw_pitch @ T_pitch_lens
+        T_robot_holder = T_robot_flange @ T_flange_yaw @ T_yaw_pitch @ T_pitch_lens
+        T_robot_lens = T_robot_holder @ self._tilt if self._built else T_robot_holder
         return RigPose(T_robot_flange=T_robot_flange, T_robot_lens=T_robot_lens,
-                       T_robot_rgb=T_robot_lens @ self._T_lens_rgb,
-                       T_robot_thermal=T_robot_lens @ self._T_lens_thermal,
+                       T_robot_rgb=T_robot_holder @ self._T_lens_rgb,
+                       T_robot_thermal=T_robot_holder @ self._T_lens_thermal,
                        yaw=float(x[0] + x[3]), pitch=float(x[4]))
 
     def inverse(self, position, yaw, pitch, check_limits=True):
@@ -307,9 +347,14 @@ class Rig:
         """
         Joints for N lens poses Omega = [p_l, alpha_l, beta_l, 0] of Eqs 14-15 (robot frame).
 
-        `positions` (N, 3) [m], `yaws` and `pitches` (N,) [rad]. Closed form: the pitch- and
-        lens-offsets are fixed by (yaw, pitch); the yaw-axis offset turns with j1, which is
-        solved from the horizontal distance; the arm's ``inverse_many`` places the flange.
+        `positions` (N, 3) [m], `yaws` and `pitches` (N,) [rad] of the lens holder. Closed
+        form: the pitch- and lens-offsets are fixed by (yaw, pitch); the yaw-axis offset
+        turns with j1, which is solved from the horizontal distance; the arm's
+        ``inverse_many`` places the flange. The joints are the ones to command (reported:
+        ``RigParameters.reported_joints`` of the true angles); the limits hold for them.
+        A ``lens_tilt`` is left out: it turns the lens axis off the holder's by its angle,
+        which moves the focus along the sun ray by f (1 / cos - 1), 0.03 mm at 1.5 deg, and
+        not across it (the chief ray goes straight through the lens centre).
         Returns ``RigSolutions``: joints (N, 5) and per pose the first check it fails
         (``reachable`` its mask), by how much, and the flange position.
         """
@@ -344,6 +389,8 @@ class Rig:
         joints[:, 1:3] = arm_joints[:, 1:]
         joints[:, 3] = _remainder(yaws - j1)
         joints[:, 4] = pitches
+        if self._built:
+            joints = p.reported_joints(joints)
         if unsolved.any():
             failure[mismatch & (failure == REACHABLE)] = HEADING_MISMATCH
             failure[behind] = BEHIND_BASE_AXIS

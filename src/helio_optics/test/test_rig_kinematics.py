@@ -1,5 +1,6 @@
 """5-DOF rig kinematics: FK(IK) round trips, Eqs 14-15, reasons, config file, canvas reach."""
 
+from dataclasses import replace
 import math
 import os
 
@@ -213,3 +214,58 @@ def test_the_escape_lift_raises_the_flange_straight_up_keeping_the_lens_orientat
     top = arm.inverse([0.26, 0.0, 0.1479])
     with pytest.raises(UnreachableError, match='no lift of the flange within 30 mm'):
         escape_lift(arm, top, 0.03)
+
+
+BUILT = RigParameters(joint_offsets=(0.004, -0.003, 0.002, 0.03, -0.02),
+                      joint_scales=(1.0, 1.0, 1.0, 1.05, 0.94),
+                      lens_tilt=(0.02, -0.015), rgb_rotation=(0.02, -0.01, 0.015),
+                      thermal_rotation=(-0.01, 0.02, 0.0))
+
+
+def test_a_built_rig_inverts_its_own_forward_kinematics_in_reported_joints():
+    """Joint offsets and scales: inverse gives the joints to command, forward reads them."""
+    rig = Rig(BUILT)
+    rng = np.random.default_rng(5)
+    for reported in rng.uniform([-1.0, 0.3, 0.3, -1.0, -1.0], [1.0, 1.0, 1.0, 1.0, 1.0],
+                                (20, 5)):
+        true = BUILT.true_joints(reported)
+        assert true == pytest.approx(reported * BUILT.joint_scales + BUILT.joint_offsets)
+        assert BUILT.reported_joints(true) == pytest.approx(reported, abs=1e-12)
+        pose = rig.forward(reported)
+        # the holder follows the TRUE angles: the perfect rig at the true joints
+        perfect = Rig(RigParameters()).forward(true)
+        assert pose.T_robot_flange == pytest.approx(perfect.T_robot_flange, abs=1e-12)
+        assert (pose.yaw, pose.pitch) == pytest.approx((true[0] + true[3], true[4]))
+        holder = pose.T_robot_lens[:3, 3]     # the tilt turns the lens about its centre
+        assert rig.inverse(holder, pose.yaw, pose.pitch) == pytest.approx(reported, abs=1e-9)
+
+
+def test_mount_turns_tilt_the_lens_and_camera_axes_by_their_angles():
+    x = np.array([0.2, 0.6, 0.5, 0.3, -0.4])
+    perfect, built = Rig(RigParameters()), Rig(replace_mounts(BUILT))
+    plain, turned = perfect.forward(x), built.forward(x)
+    assert turned.T_robot_lens[:3, 3] == pytest.approx(plain.T_robot_lens[:3, 3], abs=1e-12)
+
+    def angle_between(a, b):
+        return math.acos(min(1.0, float(a[:3, 2] @ b[:3, 2])))
+
+    tilt = math.acos(math.cos(BUILT.lens_tilt[0]) * math.cos(BUILT.lens_tilt[1]))
+    assert angle_between(turned.T_robot_lens, plain.T_robot_lens) == pytest.approx(tilt)
+    for name, rotation in (('T_robot_rgb', BUILT.rgb_rotation),
+                           ('T_robot_thermal', BUILT.thermal_rotation)):
+        # a turn (a, b, c) about x, y, z moves the optical axis by acos(cos a cos b)
+        expected = math.acos(math.cos(rotation[0]) * math.cos(rotation[1]))
+        assert angle_between(getattr(turned, name), getattr(plain, name)) == \
+            pytest.approx(expected)
+        assert getattr(turned, name)[:3, 3] == pytest.approx(getattr(plain, name)[:3, 3])
+
+
+def replace_mounts(parameters):
+    """Return `parameters` with only its mount turns (joints perfect)."""
+    return replace(RigParameters(), lens_tilt=parameters.lens_tilt,
+                   rgb_rotation=parameters.rgb_rotation,
+                   thermal_rotation=parameters.thermal_rotation)
+
+
+def test_the_build_terms_round_trip_through_the_flat_parameters():
+    assert RigParameters.from_parameters(BUILT.to_parameters()) == BUILT
