@@ -22,6 +22,7 @@ After a deliberate change of the detector or the simulated cameras, re-record th
 ``python -m helio_control.fixture_bags --out bags`` (bags/README.md).
 """
 
+import importlib.util
 import os
 import subprocess
 import sys
@@ -222,7 +223,28 @@ def test_no_controller_node_subscribes_to_the_ground_truth(tmp_path):
                          'every node of the graph')
         graph.wait_until(lambda: graph.helper.count_publishers('/sim/truth/sun_direction'),
                          60.0, 'the truth publisher')
-        for topic in ('/sim/truth/sun_direction', '/sim/truth/world_pose'):
+        for topic in ('/sim/truth/sun_direction', '/sim/truth/world_pose', '/sim/truth/build'):
             readers = {info.node_name for info in
                        graph.helper.get_subscriptions_info_by_topic(topic)}
             assert not readers & names, f'{topic} is read by {readers & names}'
+
+
+CONTROLLER_NODES = ('helio_control.lens_planner_node', 'helio_control.painter_node',
+                    'helio_drivers.dobot_driver_node', 'helio_drivers.servo_driver_node',
+                    'helio_optics.sun_estimator_node', 'helio_perception.spot_detector_node',
+                    'helio_perception.thermal_monitor_node')
+
+
+@pytest.mark.parametrize('module', CONTROLLER_NODES)
+def test_no_controller_node_loads_the_simulated_world_or_its_build(module):
+    """The drawn build lives in helio_drivers.sim and its outputs; no controller loads them."""
+    probe = (f'import sys, {module}\n'
+             "print(sorted(m for m in sys.modules if m.startswith('helio_drivers.sim')))")
+    loaded = subprocess.run([sys.executable, '-c', probe], capture_output=True, text=True,
+                            env=node_environment(), timeout=120)
+    assert loaded.returncode == 0, loaded.stderr
+    assert loaded.stdout.strip() == '[]', f'{module} loads {loaded.stdout.strip()}'
+    with open(importlib.util.find_spec(module).origin) as stream:
+        source = stream.read()
+    for hidden in ('sim/truth', 'build.yaml', 'build_seed'):
+        assert hidden not in source, f'{module} mentions {hidden!r}'

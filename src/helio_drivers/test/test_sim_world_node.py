@@ -1,4 +1,4 @@
-"""Node sim_world in-process: /clock, camera topics on simulated time, canvas, truth."""
+"""Node sim_world in-process: /clock, camera topics on simulated time, canvas, truth, build."""
 
 import datetime
 import math
@@ -7,16 +7,18 @@ import threading
 import time
 
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from helio_drivers.sim.build import draw_build
 from helio_drivers.sim.world import flat_settings, SimSettings
 from helio_drivers.sim.world_node import PARAMETER_DOCS, SimWorldNode, TRUTH_QOS
 from helio_optics.node_kit.conversions import point_to_array, pose_to_matrix, stamp_to_seconds
 from helio_optics.node_kit.in_process_graph import InProcessGraph
-from helio_optics.rig_kinematics import default_rig_file
+from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
 import numpy as np
 import pytest
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import String
 import yaml
 
 
@@ -25,7 +27,7 @@ def test_sim_world_publishes_clock_cameras_canvas_and_truth_on_sim_time(tmp_path
         node = graph.add(SimWorldNode(**graph.node_options(
             real_time_factor=20.0, dobot_port=str(tmp_path / 'dobot'),
             servo_port=str(tmp_path / 'servo'), rig_file=default_rig_file(), flux_rays=5000,
-            canvas_rate=2.0, output_dir=str(tmp_path / 'out'))))
+            canvas_rate=2.0, output_dir=str(tmp_path / 'out'), build='drawn', build_seed=5)))
         got = {'clock': graph.collect(Clock, '/clock', QoSProfile(depth=10)),
                'thermal': graph.collect(Image, 'thermal/image_raw', qos_profile_sensor_data),
                'rgb': graph.collect(Image, 'rgb/image_raw', qos_profile_sensor_data),
@@ -33,9 +35,10 @@ def test_sim_world_publishes_clock_cameras_canvas_and_truth_on_sim_time(tmp_path
                'canvas': graph.collect(Image, 'sim/canvas', QoSProfile(depth=1)),
                'sun': graph.collect(Vector3Stamped, 'sim/truth/sun_direction', TRUTH_QOS),
                'world': graph.collect(PoseStamped, 'sim/truth/world_pose', TRUTH_QOS),
-               'rgb_pose': graph.collect(PoseStamped, 'sim/truth/rgb_pose', TRUTH_QOS)}
-        for collector in got.values():
-            collector.wait_for_count(3, timeout=60.0)
+               'rgb_pose': graph.collect(PoseStamped, 'sim/truth/rgb_pose', TRUTH_QOS),
+               'build': graph.collect(String, 'sim/truth/build', TRUTH_QOS)}
+        for name, collector in got.items():
+            collector.wait_for_count(1 if name == 'build' else 3, timeout=60.0)
         got['thermal'].wait_for_count(12, timeout=60.0)
         got = {name: collector.messages for name, collector in got.items()}
         assert (tmp_path / 'dobot').exists() and (tmp_path / 'servo').exists()
@@ -56,7 +59,13 @@ def test_sim_world_publishes_clock_cameras_canvas_and_truth_on_sim_time(tmp_path
         assert len(whole) / sum(whole) == pytest.approx(8.7, rel=0.25)
         rgb, info = got['rgb'][-1], got['info'][-1]
         assert (rgb.encoding, rgb.width, rgb.height) == ('rgb8', info.width, info.height)
-        assert list(info.k) == pytest.approx(node.world.rgb.camera.matrix.ravel().tolist())
+        # camera_info: the intrinsics the user's calibration gave, not the build's true ones
+        published = SimSettings().rgb.camera()
+        assert list(info.k) == pytest.approx(published.matrix.ravel().tolist())
+        assert not np.allclose(node.world.rgb.camera.matrix, published.matrix)
+        # the build: drawn from the rig file with the seed, published and written once
+        build = draw_build(load_rig_parameters(default_rig_file()), seed=5)
+        assert yaml.safe_load(got['build'][-1].data) == build.to_dict()
         assert got['canvas'][-1].encoding == 'mono8'
         clock = [m.clock.sec + 1e-9 * m.clock.nanosec for m in got['clock']]
         assert all(b > a for a, b in zip(clock, clock[1:]))
@@ -78,6 +87,7 @@ def test_sim_world_publishes_clock_cameras_canvas_and_truth_on_sim_time(tmp_path
         assert pose_to_matrix(rgb_pose.pose) == pytest.approx(
             np.linalg.inv(node.world.T_robot_world) @ rig_pose.T_robot_rgb, abs=1e-9)
     assert (tmp_path / 'out' / 'canvas.png').exists()
+    assert yaml.safe_load((tmp_path / 'out' / 'build.yaml').read_text()) == build.to_dict()
     assert (tmp_path / 'out' / 'dots.csv').exists()
 
 

@@ -150,7 +150,7 @@ def aruco_dictionary(name):
 def make_panel_texture(extent=(-0.05, 0.15, -0.05, 0.15), metres_per_pixel=2e-4,
                        marker_side=0.04, marker_id=0, dictionary='DICT_4X4_50',
                        quiet_zone=0.006, wood_rgb=WOOD_RGB, grain=0.06, seed=0,
-                       sheet_margins=None, print_reflectance=(0.0, 1.0)):
+                       sheet_margins=None, print_reflectance=(0.0, 1.0), marker_scale=1.0):
     """
     Make an RGB wood panel texture (8-bit sRGB) with an ArUco marker centred on the origin.
 
@@ -161,7 +161,8 @@ def make_panel_texture(extent=(-0.05, 0.15, -0.05, 0.15), metres_per_pixel=2e-4,
     that its top-left corner is at (-side/2, +side/2): the marker frame's x/y axes are the
     world x/y axes. `grain` is the relative amplitude of a smooth random wood grain.
     `print_reflectance` (ink, paper) is the linear reflectance of the marker's black and white
-    (see `draw_marker`).
+    (see `draw_marker`), `marker_scale` the printed size over `marker_side` (a printer's
+    scale error: the black square is then marker_side * marker_scale wide).
     """
     x_min, x_max, y_min, y_max = extent
     width = int(round((x_max - x_min) / metres_per_pixel))
@@ -178,12 +179,12 @@ def make_panel_texture(extent=(-0.05, 0.15, -0.05, 0.15), metres_per_pixel=2e-4,
     texture = GroundTexture(image=image, extent=tuple(extent))
     if marker_side > 0:
         draw_marker(texture, marker_side, marker_id, dictionary, quiet_zone, sheet_margins,
-                    print_reflectance)
+                    print_reflectance, marker_scale)
     return texture
 
 
 def draw_marker(texture, side, marker_id=0, dictionary='DICT_4X4_50', quiet_zone=0.006,
-                sheet_margins=None, print_reflectance=(0.0, 1.0)):
+                sheet_margins=None, print_reflectance=(0.0, 1.0), scale=1.0):
     """
     Draw an ArUco marker (black square `side` [m]) centred on the world origin in place.
 
@@ -192,7 +193,9 @@ def draw_marker(texture, side, marker_id=0, dictionary='DICT_4X4_50', quiet_zone
     `print_reflectance` (ink, paper) [0-1] is the linear reflectance of the black and the
     white: (0, 1) is an ideal print; a laser print on office paper reflects about 4-6 % and
     80-90 %, which is what decides whether the black in full sun is darker than the white
-    in a shadow (only the sky's light).
+    in a shadow (only the sky's light). `scale` is the print's size over `side` (the
+    sheet's margins stay): its edges then fall inside texture pixels, which take the ink's
+    share of their area, mixed in linear light.
     """
     ink, paper = (float(v) for v in print_reflectance)
     if not 0.0 <= ink < paper <= 1.0:
@@ -222,9 +225,40 @@ def draw_marker(texture, side, marker_id=0, dictionary='DICT_4X4_50', quiet_zone
     marker = np.where(marker > 127, white, black).astype(np.uint8)
     mc, mr = texture.texture_coordinates(-h, h)
     mc, mr = int(round(mc + 0.5)), int(round(mr + 0.5))
+    if scale != 1.0:    # a pixel more on each side holds a print up to a pixel larger
+        mr, mc, pixels = mr - 1, mc - 1, pixels + 2
+        marker = _scaled_marker(texture, side * scale, marker_id, dictionary, ink, paper,
+                                (mr, mc, pixels))
     patch = marker if texture.image.ndim == 2 else marker[:, :, None]
     texture.image[mr:mr + pixels, mc:mc + pixels] = patch
     return texture
+
+
+def _scaled_marker(texture, printed_side, marker_id, dictionary, ink, paper, box,
+                   supersample=8):
+    """
+    Return the 8-bit patch of `box` (row, column, size) with a marker `printed_side` wide.
+
+    Each texture pixel takes the ink's share of its area (sampled `supersample`^2 times),
+    mixed in linear light; the patch must hold the printed marker (a print within a pixel of
+    the nominal size).
+    """
+    row, column, size = box
+    cells = cv2.aruco.generateImageMarker(aruco_dictionary(dictionary), marker_id,
+                                          aruco_dictionary(dictionary).markerSize + 2, 1)
+    count = cells.shape[0]
+    offsets = (np.arange(size * supersample) + 0.5) / supersample - 0.5
+    x, _ = texture.world_of_texture(column + offsets, 0)
+    _, y = texture.world_of_texture(0, row + offsets)
+    half = printed_side / 2.0
+    u = np.floor((x + half) / printed_side * count).astype(int)     # cell column
+    v = np.floor((half - y) / printed_side * count).astype(int)     # cell row
+    inside = (u[None, :] >= 0) & (u[None, :] < count) & (v[:, None] >= 0) & (v[:, None] < count)
+    white = cells[np.clip(v, 0, count - 1)][:, np.clip(u, 0, count - 1)] > 127
+    ink_share = (inside & ~white).astype(np.float32).reshape(
+        size, supersample, size, supersample).mean(axis=(1, 3))
+    linear = ink * ink_share + paper * (1.0 - ink_share)
+    return np.rint(255.0 * linear_to_srgb(linear)).astype(np.uint8)
 
 
 @dataclass(frozen=True)

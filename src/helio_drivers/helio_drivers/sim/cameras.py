@@ -109,10 +109,14 @@ def centikelvin_to_celsius(counts):
 class ThermalCamera:
     """Renders the panel surface temperature as the thermal camera reads it."""
 
-    def __init__(self, settings=None, seed=0):
-        """Cache the pixel-centre rays of the camera; `seed` draws the noise bank."""
+    def __init__(self, settings=None, seed=0, camera=None):
+        """
+        Cache the pixel-centre rays of the camera; `seed` draws the noise bank.
+
+        `camera`: the true PinholeCamera (a build's, ``sim.build``); default the settings'.
+        """
         self.settings = settings or ThermalSettings()
-        self.camera = self.settings.camera()
+        self.camera = camera or self.settings.camera()
         self._renderer = GroundRenderer(self.camera, supersample=1)
         self._view_key = None      # (pose, panel, placement) of the kept view
         self._view = None          # (pixels seeing the panel, their surface sampler)
@@ -385,15 +389,18 @@ class RgbCamera:
     """Renders the lit panel, the marker, the char and the light spot as a webcam does."""
 
     def __init__(self, panel_extent, pixel_size, settings=None, marker_side=0.04,
-                 marker_id=0, dictionary='DICT_4X4_50', seed=0, print_reflectance=(0.0, 1.0)):
+                 marker_id=0, dictionary='DICT_4X4_50', seed=0, print_reflectance=(0.0, 1.0),
+                 camera=None, marker_scale=1.0):
         """
         Build the panel's albedo texture (pixels aligned with the char raster).
 
         `print_reflectance` (ink, paper): the marker print's linear reflectance
-        (``ground_render.draw_marker``).
+        (``ground_render.draw_marker``). `camera`: the true PinholeCamera (a build's,
+        ``sim.build``: distortion included); default the settings' ideal one.
+        `marker_scale`: the marker as printed over `marker_side` (a build's).
         """
         self.settings = settings or RgbSettings()
-        self.camera = self.settings.camera()
+        self.camera = camera or self.settings.camera()
         self._renderer = GroundRenderer(self.camera, supersample=self.settings.supersample)
         self._webcam = self._renderer.webcam(self.settings.webcam(seed + 7))
         s = self.settings
@@ -403,7 +410,8 @@ class RgbCamera:
         texture = make_panel_texture(extent=panel_extent, metres_per_pixel=pixel_size,
                                      marker_side=marker_side, marker_id=marker_id,
                                      dictionary=dictionary, seed=seed,
-                                     print_reflectance=print_reflectance)
+                                     print_reflectance=print_reflectance,
+                                     marker_scale=marker_scale)
         self.extent = tuple(panel_extent)
         self.pixel_size = float(pixel_size)
         # linear, rows from y_max (top view); RGB and a fourth, empty channel: OpenCV warps

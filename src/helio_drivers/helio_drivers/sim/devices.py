@@ -13,8 +13,7 @@ import math
 
 from helio_drivers.dobot_emulator import DobotEmulator
 from helio_drivers.maestro_emulator import MaestroEmulator
-from helio_drivers.maestro_protocol import ServoCalibration
-import numpy as np
+from helio_drivers.sim.build import BuiltJoints, ideal_build
 
 
 @dataclass(frozen=True)
@@ -38,15 +37,23 @@ class DeviceSettings:
 class SimDevices:
     """Both emulators on their ptys, moving on the given clock."""
 
-    def __init__(self, clock, settings=None):
-        """Open the two pseudo-terminals and start the emulators' reader threads."""
+    def __init__(self, clock, settings=None, build=None):
+        """
+        Open the two pseudo-terminals and start the emulators' reader threads.
+
+        `build` (``sim.build.Build``): the servos' true calibration and play, the Dobot's
+        zero offsets and repeatability; default the ideal build (the settings' constants).
+        """
         self.settings = settings or DeviceSettings()
         s = self.settings
-        self.calibrations = (
-            ServoCalibration('lens_yaw', s.yaw_channel, us_per_rad=s.servo_us_per_rad,
-                             centre_pulse_us=s.servo_centre_us),
-            ServoCalibration('lens_pitch', s.pitch_channel, us_per_rad=s.servo_us_per_rad,
-                             centre_pulse_us=s.servo_centre_us))
+        if build is None:
+            build = ideal_build(None, s.servo_centre_us, s.servo_us_per_rad)
+        self.build = build
+        self._true = BuiltJoints(build, seed=build.seed)
+        # the emulated Maestro turns its pulses into angles with the TRUE servos; it reports
+        # the pulses, which the driver turns back with the nominal constants
+        self.calibrations = (build.servo('lens_yaw').calibration(s.yaw_channel),
+                             build.servo('lens_pitch').calibration(s.pitch_channel))
         self.dobot = DobotEmulator(port_path=s.dobot_port, clock=clock,
                                    initial_joints_deg=s.initial_joints_deg)
         try:
@@ -65,10 +72,15 @@ class SimDevices:
         return self.dobot.port_path, self.servo.port_path
 
     def joint_positions(self):
-        """Return x = (j1, j2, j3, lens_yaw, lens_pitch) [rad] at the clock's present time."""
-        arm = self.dobot.joint_positions()
-        wrist = self.servo.joint_positions()
-        return np.array([arm[0], arm[1], arm[2], wrist['lens_yaw'], wrist['lens_pitch']])
+        """
+        Return the TRUE x = (j1, j2, j3, lens_yaw, lens_pitch) [rad] at the clock's time.
+
+        The build's (``BuiltJoints``): the Dobot's reported angles plus its zero offsets and
+        scatter, the servos' angles through their play. Read it once per instant (the play
+        and the scatter keep state).
+        """
+        return self._true.true_joints(self.dobot.joint_positions(),
+                                      self.servo.joint_positions())
 
     def close(self):
         """Close both pseudo-terminals and stop the emulators."""

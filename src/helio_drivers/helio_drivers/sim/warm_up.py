@@ -49,16 +49,20 @@ def compiled_kernels():
     return [name for name in all_kernels() if getattr(kernels, name).signatures]
 
 
-def warm_up(rig=None, steps=10, settings=None):
+def warm_up(rig=None, steps=10, settings=None, build=None):
     """
     Run a throwaway world through heating, a move and every render; return the kernels run.
 
     `steps` world steps are taken at the heating pose and again during the move; `settings`
-    (SimSettings, default the defaults) those of the world that will run, so that the
-    kernels its settings call are the ones made ready.
+    (SimSettings, default the defaults) and `build` (``sim.build.Build``, default the ideal
+    build of `rig`) those of the world that will run, so that the kernels its settings and
+    its cameras (with or without distortion) call are the ones made ready.
     """
-    rig = rig or load_rig_parameters(default_rig_file())
-    world = SimWorld(settings or SimSettings(), rig)
+    if build is None:
+        world = SimWorld(settings or SimSettings(),
+                         rig or load_rig_parameters(default_rig_file()))
+    else:
+        world = SimWorld(settings or SimSettings(), build=build)
     here = true_sun_focus_joints(world, DOT, D_LP)
     there = true_sun_focus_joints(world, (DOT[0] + 0.004, DOT[1]), D_LP)
     for joints in (here, there):

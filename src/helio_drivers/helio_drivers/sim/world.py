@@ -8,7 +8,9 @@ heats the wood and chars it. ``thermal_image()`` and ``rgb_image()`` render the 
 their poses on the end effector; ``canvas_image()`` and ``charred_dots()`` give the painting
 and its ground truth, ``canvas_picture()`` the burnt panel as a person sees it;
 ``write_outputs(dir)`` writes ``canvas.png`` (the picture), ``canvas_mask.png`` (the char
-map) and ``dots.csv``.
+map), ``dots.csv`` and ``build.yaml`` (the rig as built, ``sim.build``: a drawn build's
+geometry, servos, camera intrinsics and marker print differ from what the controller
+believes, as a real rig's do).
 
 Nothing here tells the controller what it wants to know: the robot's heading, the sun and
 the lens focus are only visible through the images, as on the real rig.
@@ -21,6 +23,7 @@ import math
 import os
 
 import cv2
+from helio_drivers.sim.build import BuiltRig, ideal_build
 from helio_drivers.sim.cameras import (light_window, RgbCamera, RgbSettings, ThermalCamera,
                                        ThermalSettings)
 from helio_drivers.sim.clock import SimClock
@@ -32,8 +35,9 @@ from helio_optics.ephemeris import Site
 from helio_optics.geometry import invert_transform
 from helio_optics.lens import LensParameters
 from helio_optics.node_kit.process_tuning import keep_large_buffers
-from helio_optics.rig_kinematics import Rig, RigParameters
+from helio_optics.rig_kinematics import RigParameters
 import numpy as np
+import yaml
 
 
 @dataclass(frozen=True)
@@ -166,13 +170,15 @@ def flat_settings(settings):
 class SimWorld:
     """The simulated world; see the module docstring."""
 
-    def __init__(self, settings=None, rig_parameters=None, joints=None):
+    def __init__(self, settings=None, rig_parameters=None, joints=None, build=None):
         """
         Build the world. `joints` is a callable returning x (5,) [rad] at the clock's time.
 
         Without it, set the joints with ``set_joints`` (tests) or host the emulators on the
         world's clock (``SimDevices(world.clock)``) and attach their ``joint_positions`` with
-        ``attach_joint_source``.
+        ``attach_joint_source``. `build` (``sim.build.Build``) is the rig as built: its
+        geometry, mounts, camera intrinsics and marker print; default the ideal build of
+        `rig_parameters` (exactly the rig file).
         """
         # its 0.3-4 MB arrays, allocated and freed every step and frame, are reused from the
         # heap, not page-faulted in anew (a tridiagonal product 1.1 -> 0.3 ms:
@@ -183,7 +189,10 @@ class SimWorld:
         if not s.step > 0.0:
             raise ValueError(f'step must be > 0 s, got {s.step}')
         self.clock = SimClock(s.start_datetime())
-        self.rig = Rig(rig_parameters or RigParameters())
+        if build is not None and rig_parameters is not None:
+            raise ValueError('give the world a build or rig parameters, not both')
+        self.build = build or ideal_build(rig_parameters or RigParameters())
+        self.rig = BuiltRig(self.build)
         self.T_robot_world = self.rig.parameters.T_robot_world
         self.T_world_robot = invert_transform(self.T_robot_world)
         self.site = Site(s.latitude_deg, s.longitude_deg, s.elevation)
@@ -192,10 +201,18 @@ class SimWorld:
         self.flux = LensFlux(s.lens, rays=s.flux_rays, seed=s.seed, beam_spread=s.beam_spread,
                              moving_rays=s.flux_rays_moving)
         self.panel = WoodPanel(s.wood, s.grid, s.panel_extent)
-        self.thermal = ThermalCamera(s.thermal, seed=s.seed)
+        # the cameras' camera_info: the intrinsics the user's calibration gave (nominal);
+        # the images are rendered with the build's true ones
+        self.published_cameras = {'rgb': s.rgb.camera(), 'thermal': s.thermal.camera()}
+        self.thermal = ThermalCamera(
+            s.thermal, seed=s.seed,
+            camera=self.build.thermal_camera.true_camera(self.published_cameras['thermal']))
         self.rgb = RgbCamera(self.panel.extent, s.grid.fine_cell, s.rgb, s.marker_side,
                              s.marker_id, s.marker_dictionary, seed=s.seed,
-                             print_reflectance=s.marker_print_reflectance)
+                             print_reflectance=s.marker_print_reflectance,
+                             camera=self.build.rgb_camera.true_camera(
+                                 self.published_cameras['rgb']),
+                             marker_scale=self.build.marker_scale)
         self._rng = np.random.default_rng(s.seed)
         self._joints_source = joints
         self._holding_joints = self._joints_held = False     # one_instant
@@ -419,13 +436,18 @@ class SimWorld:
 
     def write_outputs(self, directory):
         """
-        Write canvas.png, canvas_mask.png and dots.csv; return (canvas.png, dots.csv).
+        Write canvas.png, canvas_mask.png, dots.csv, build.yaml; return (canvas.png, dots.csv).
 
         canvas.png is the burnt panel as a person sees it (``canvas_picture``),
         canvas_mask.png the char map as data (``canvas_image``: 255 bare, 0 charred), both
-        top views of the same pixels; dots.csv the charred dots (ground truth).
+        top views of the same pixels; dots.csv the charred dots (ground truth); build.yaml
+        the rig as built (``sim.build.Build.to_dict``: hidden truth, as dots.csv).
         """
         os.makedirs(directory, exist_ok=True)
+        with open(os.path.join(directory, 'build.yaml'), 'w') as stream:
+            stream.write('# the simulated rig as built (helio_drivers.sim.build): hidden from '
+                         'every controller node; SI units, rad\n')
+            yaml.safe_dump(self.build.to_dict(), stream, sort_keys=False)
         png = os.path.join(directory, 'canvas.png')
         mask = os.path.join(directory, 'canvas_mask.png')
         for path, image in ((png, cv2.cvtColor(self.canvas_picture(), cv2.COLOR_RGB2BGR)),

@@ -24,7 +24,8 @@ and publishes:
   ``rgb_pose`` (geometry_msgs/PoseStamped, world frame: the true pose of the rgb optical
   frame, with each RGB image and its stamp); ``light`` (helio_msgs/LightTruth: the light's
   power centre, the peak irradiance on the panel and the DNI, to tell whether the focus is
-  on the wood).
+  on the wood); ``build`` (std_msgs/String, once: the rig as built, ``sim.build.Build``
+  as YAML, the same as ``build.yaml`` beside ``canvas.png``).
   No controller node subscribes to them: the controller must find the sun and the marker
   itself (a test enforces that).
 
@@ -73,6 +74,7 @@ import time
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped, PoseStamped, Vector3, Vector3Stamped
+from helio_drivers.sim.build import build_from_name, BUILDS
 from helio_drivers.sim.clock import Lockstep, Pacer
 from helio_drivers.sim.devices import DeviceSettings, SimDevices
 from helio_drivers.sim.warm_up import warm_up
@@ -94,7 +96,8 @@ from rclpy.qos import ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
-from std_msgs.msg import Header
+from std_msgs.msg import Header, String
+import yaml
 
 
 @dataclass(frozen=True)
@@ -251,17 +254,29 @@ class SimWorldNode(Node):
             initial_joints_deg=tuple(declare(
                 self, 'initial_joints_deg', list(DeviceSettings.initial_joints_deg),
                 'Dobot j1..j4 at start [deg]')))
-        rig = load_rig_parameters(rig_file)
-        self.world = SimWorld(self.settings, rig)
+        build_name = declare(
+            self, 'build', 'ideal',
+            "HIDDEN truth: the rig as built. 'ideal': exactly the rig file and the nominal "
+            "servo constants; 'drawn': a build drawn from a 3D-printed rig's tolerances "
+            '(sim/build.py, SIMULATION.md), published only on sim/truth/build and written '
+            'as build.yaml', choices=BUILDS)
+        build_seed = declare(self, 'build_seed', 0, 'seed of the drawn build', 0, 2 ** 31 - 1)
+        build_scale = declare(self, 'build_scale', 1.0,
+                              "the drawn build's tolerances over a 3D-printed rig's (1/3: a "
+                              'careful build) [-]', 0.0, 3.0)
+        self.build = build_from_name(build_name, load_rig_parameters(rig_file), build_seed,
+                                     build_scale, devices.servo_centre_us,
+                                     devices.servo_us_per_rad)
+        self.world = SimWorld(self.settings, build=self.build)
         # every kernel's machine code loaded (or compiled) now, before the emulated devices
         # answer: numba loads it at a kernel's first call, and those loads, at the first
         # step or the first move, held the interpreter lock longer than the drivers' 0.1 s
         # serial timeouts (the servo driver reported its link lost at the graph's first move)
         started = time.perf_counter()
-        ready = warm_up(rig, steps=2, settings=self.settings)
+        ready = warm_up(steps=2, settings=self.settings, build=self.build)
         self.get_logger().info(f'{len(ready)} compiled kernels ready in '
                                f'{time.perf_counter() - started:.2f} s')
-        self.devices = SimDevices(self.world.clock, devices)
+        self.devices = SimDevices(self.world.clock, devices, self.build)
         self.world.attach_joint_source(self.devices.joint_positions)
         dobot_port, servo_port = self.devices.ports
         self.get_logger().info(
@@ -270,8 +285,10 @@ class SimWorldNode(Node):
             f'{self.real_time_factor:g}; step {self.settings.step:g} s')
 
         self.clock_pub = self.create_publisher(Clock, '/clock', QoSProfile(depth=1))
-        self._rgb_topics = self._camera_topics('rgb', 'rgb8', self.world.rgb.camera)
-        self._thermal_topics = self._camera_topics('thermal', '16UC1', self.world.thermal.camera)
+        # camera_info holds the intrinsics the user's calibration gave, not the build's
+        published = self.world.published_cameras
+        self._rgb_topics = self._camera_topics('rgb', 'rgb8', published['rgb'])
+        self._thermal_topics = self._camera_topics('thermal', '16UC1', published['thermal'])
         self.canvas_pub = self.create_publisher(Image, 'sim/canvas', QoSProfile(depth=1))
         self.truth_sun_pub = self.create_publisher(Vector3Stamped, 'sim/truth/sun_direction',
                                                    TRUTH_QOS)
@@ -282,6 +299,9 @@ class SimWorldNode(Node):
         self.truth_light_pub = self.create_publisher(LightTruth, 'sim/truth/light', TRUTH_QOS)
         self.truth_rgb_pub = self.create_publisher(PoseStamped, 'sim/truth/rgb_pose',
                                                    TRUTH_QOS)
+        self.truth_build_pub = self.create_publisher(String, 'sim/truth/build', TRUTH_QOS)
+        self.truth_build_pub.publish(String(data=yaml.safe_dump(self.build.to_dict(),
+                                                                sort_keys=False)))
         self._cameras_out = set()
         self._plug(declare(
             self, 'unplugged', [''],
