@@ -6,7 +6,7 @@ The ``helio`` command: run the graph, paint, record, replay, report.
     helio sim [--real-time-factor X] [--out DIR] [--nodes ...] [--set NODE.PARAM=VALUE]
     helio rig --dobot-port PORT|auto --servo-port PORT [--rgb-camera PKG/EXE] ...
     helio preview PICTURE --out DIR [options]       (no graph needed)
-    helio paint PICTURE [goal options] [--out DIR] [--sim]
+    helio paint PICTURE [goal options] [--out DIR] [--sim [--set NODE.PARAM=VALUE]]
     helio record --out DIR [--camera-decimation N] [--sim-time] | --recover BAG
     helio replay BAG [--rate R] [--delay S] [--exclude TOPIC ...]
     helio report RUN_DIR
@@ -408,6 +408,12 @@ class PaintSession:
                             f'the simulated graph started but no painter answers on '
                             f'{graph.helper.resolve_topic_name("paint")} within '
                             f'{self.arguments.start_timeout:g} s (logs: {self.log_dir})')
+                elif self.arguments.set:
+                    raise CommandError(
+                        '--set sets the parameters of the simulated graph that helio paint '
+                        'starts, but a painter already answers on '
+                        f'{graph.helper.resolve_topic_name("paint")}: stop that graph, or set '
+                        'its parameters there')
                 self._start_recorder()
                 return self._paint(graph, client, goal)
             finally:
@@ -421,8 +427,10 @@ class PaintSession:
     def _start_graph(self):
         from helio_control.bringup import interrupts_deferred, simulated_graph, start_graph
         print('[helio] no painter is running: starting the simulated graph', file=sys.stderr)
-        overrides = {'sim_world': {'real_time_factor': self.arguments.real_time_factor,
-                                   'output_dir': self.run_dir}}
+        overrides = _overrides(self.arguments.set)
+        world = overrides.setdefault('sim_world', {})
+        world.setdefault('real_time_factor', self.arguments.real_time_factor)
+        world['output_dir'] = self.run_dir
         port_dir = tempfile.mkdtemp(prefix='helio_paint_ports_')
         with interrupts_deferred():     # no node started but not kept for stopping
             self.group = start_graph(simulated_graph(port_dir, overrides=overrides),
@@ -559,6 +567,9 @@ def build_parser(action_type=None):
     paint.add_argument('--sim', action='store_true',
                        help='when no painter answers, start the simulated graph and paint '
                             'there (without it: exit 1 naming the domain and namespace)')
+    paint.add_argument('--set', action='append', metavar='NODE.PARAM=VALUE',
+                       help='override a node parameter of a started simulated graph (YAML '
+                            'value), e.g. sim_world.build=drawn; repeatable')
     paint.add_argument('--no-record', action='store_true', help='do not record the run')
     paint.add_argument('--camera-decimation', type=_positive_int, default=5,
                        help='record every N-th camera message')
