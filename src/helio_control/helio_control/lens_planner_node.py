@@ -744,7 +744,7 @@ class LensPlannerNode(Node):
         # off its normal, against 0.05 mm square on): keep the squarest views, spread.
         candidates.sort(key=lambda candidate: candidate[0])
         squarest = [x for _, x in candidates[:3 * count]]
-        return sun_sweep._spread(squarest)[:count]
+        return sun_sweep.spread(squarest)[:count]
 
     def _save(self, name, tree, notes=None):
         return save_calibration(self.calibration_dir, name, tree, self.rig_description,

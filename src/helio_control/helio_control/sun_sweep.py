@@ -243,7 +243,7 @@ def sweep_poses(rig, T_robot_world, sun, camera, marker_side, points, count=6,
     groups = {}
     for x, (_, _, tilt, turn, _) in candidates:
         groups.setdefault((tilt, turn), []).append(x)
-    queues = [_spread(poses) for _, poses in sorted(groups.items())]
+    queues = [spread(poses) for _, poses in sorted(groups.items())]
     chosen = []
     while len(chosen) < count and any(queues):
         for queue in queues:
@@ -252,7 +252,7 @@ def sweep_poses(rig, T_robot_world, sun, camera, marker_side, points, count=6,
     return chosen
 
 
-def _spread(poses):
+def spread(poses):
     """Return the poses reordered so that any prefix is spread over the list."""
     order, remaining = [], list(range(len(poses)))
     while remaining:
