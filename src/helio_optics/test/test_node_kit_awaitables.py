@@ -1,6 +1,8 @@
-"""Coroutine waits of the kit on a real node: node-clock sleeps, bounded waits, discovery."""
+"""Coroutine waits of the kit on a real node: sleeps, bounded waits, discovery, threads."""
 
-from helio_optics.node_kit.awaitables import discovered, FirstOf, sleep, within
+import threading
+
+from helio_optics.node_kit.awaitables import discovered, FirstOf, in_thread, sleep, within
 from helio_optics.node_kit.in_process_graph import InProcessGraph
 from rclpy.parameter import Parameter
 from rclpy.time import Time
@@ -60,3 +62,32 @@ def test_discovery_that_never_happens_is_a_timeout_naming_it():
         assert run(graph, look()) == 'the phantom server is not available after 0.3 s'
         servers = iter([False, False, True])
         assert run(graph, discovered(graph.helper, lambda: next(servers), 5.0, 'x')) is None
+
+
+def test_a_computation_on_a_thread_leaves_the_executor_serving_callbacks():
+    """While in_thread's function blocks, a timer keeps firing; its result or error comes."""
+    release, ticks = threading.Event(), []
+
+    def blocked(value):
+        assert release.wait(10.0)
+        return value * 2
+
+    def failing():
+        raise ValueError('no fit')
+
+    async def procedure():
+        doubled = await in_thread(graph.helper, blocked, 21)
+        try:
+            await in_thread(graph.helper, failing)
+        except ValueError as error:
+            return doubled, str(error)
+        return doubled, None
+
+    with InProcessGraph() as graph:
+        graph.helper.create_timer(0.01, lambda: ticks.append(1))
+        task = graph.executor.create_task(procedure())
+        graph.wait_until(lambda: len(ticks) >= 5, 5.0, 'timer ticks while the thread blocks')
+        assert not task.done()
+        release.set()
+        graph.wait_until(task.done, 10.0, 'the task')
+        assert task.result() == (42, 'no fit')

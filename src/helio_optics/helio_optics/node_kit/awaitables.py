@@ -16,9 +16,13 @@ why the MultiThreadedExecutor of rclpy 7.1.6 is avoided). These helpers make the
   wait for it first);
 - ``FirstOf``: one Future that any callback may complete (the first result wins);
 - ``NextTurn``: run a callable at the executor's next turn, after the messages that are
-  already waiting (a node-clock timeout that must not beat data queued behind a /clock).
+  already waiting (a node-clock timeout that must not beat data queued behind a /clock);
+- ``await in_thread(node, function, *args)``: a long computation (a calibration's fit) on a
+  thread of its own, its result (or exception) handed back by a guard condition, so the
+  executor serves heartbeats, leases and topics meanwhile.
 """
 
+import threading
 import time
 
 from rclpy.clock import Clock, ClockType
@@ -118,3 +122,39 @@ async def discovered(node, ready, timeout, what):
         if time.monotonic() > deadline:
             raise TimeoutError(f'{what} is not available after {timeout:g} s')
         await sleep(node, 0.05, wall=True)
+
+
+async def in_thread(node, function, *args):
+    """
+    Return `function(*args)` computed on a thread of its own; raise what it raised.
+
+    The executor goes on meanwhile (one thread, ``rclpy.spin``): the thread triggers a guard
+    condition when it is done, whose callback completes the awaited future (as the drivers'
+    device threads wake their action callbacks).
+    """
+    future = Future()
+    outcome = {}
+
+    def finished():
+        if future.done():
+            return
+        if 'error' in outcome:
+            future.set_exception(outcome['error'])
+        else:
+            future.set_result(outcome.get('value'))
+
+    guard = node.create_guard_condition(finished)
+
+    def run():
+        try:
+            outcome['value'] = function(*args)
+        except BaseException as error:      # handed to the awaiting coroutine
+            outcome['error'] = error
+        guard.trigger()
+
+    threading.Thread(target=run, name=f'in_thread:{getattr(function, "__name__", "")}',
+                     daemon=True).start()
+    try:
+        return await future
+    finally:
+        node.destroy_guard_condition(guard)
