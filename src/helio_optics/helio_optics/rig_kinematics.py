@@ -294,7 +294,13 @@ class Rig:
 
     def __init__(self, parameters=None):
         """Use the given RigParameters, or the defaults of config/rig.yaml."""
-        self.parameters = parameters or RigParameters()
+        self.calibrations_applied = 0      # rig calibrations taken (``apply_calibration``)
+        self.calibration_id = ''           # the last one's id
+        self.set_parameters(parameters or RigParameters())
+
+    def set_parameters(self, parameters):
+        """Use new RigParameters (a rig calibration's) from now on."""
+        self.parameters = parameters
         self.arm = DobotArm(self.parameters.arm)
         self._T_lens_rgb = self.parameters.T_lens_rgb
         self._T_lens_thermal = self.parameters.T_lens_thermal
@@ -446,6 +452,22 @@ class Rig:
                              f'got {world_in_robot!r} and {world_yaw!r}')
         self.parameters = replace(self.parameters, world_in_robot=position,
                                   world_yaw=float(world_yaw))
+
+    def apply_calibration(self, values, calibration_id=''):
+        """
+        Use a rig calibration's flat values ({name: value}, the names of config/rig.yaml).
+
+        Unknown names raise ValueError; the names left out keep their present values.
+        `calibration_id` names the calibration (``calibration_id`` tells which one is used).
+        """
+        flat = self.parameters.to_parameters()
+        unknown = sorted(set(values) - set(flat))
+        if unknown:
+            raise ValueError(f'unknown rig parameters {unknown}')
+        flat.update(values)
+        self.set_parameters(RigParameters.from_parameters(flat))
+        self.calibrations_applied += 1
+        self.calibration_id = str(calibration_id)
 
     def check_limits(self, x):
         """Raise UnreachableError for the first joint of x outside its limits."""

@@ -19,7 +19,7 @@ with descriptors; those read per estimate are dynamic, the others read-only).
 
 import collections
 import copy
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 import datetime
 import math
 import time
@@ -28,7 +28,7 @@ import traceback
 from helio_msgs.msg import SpotObservation, SunEstimate
 from helio_msgs.srv import EstimateSun
 from helio_optics.ephemeris import angle_offsets, corrected_angles, sun_position
-from helio_optics.geometry import direction_from_angles, transform_points
+from helio_optics.geometry import direction_from_angles, invert_transform, transform_points
 from helio_optics.node_kit.conversions import point_to_array, stamp_from_seconds
 from helio_optics.node_kit.conversions import stamp_to_nanoseconds, stamp_to_seconds
 from helio_optics.node_kit.deployment import declare_lens, declare_rig, declare_site
@@ -54,7 +54,9 @@ class _Buffered:
 
     stamp: object            # builtin_interfaces/Time of the image
     seconds: float
-    observation: Observation
+    joints: np.ndarray       # reported, at the image (the lens pose is made at the fit, by
+    #                          the rig model then: a rig calibration since applies to it)
+    centre: np.ndarray       # world frame [m]
     sun: object              # pysolar SunPosition at the stamp (None: ephemeris failed)
 
 
@@ -64,7 +66,7 @@ class _Waiting:
 
     stamp: object            # builtin_interfaces/Time of the image
     seconds: float
-    centre: np.ndarray       # in the robot frame [m]
+    centre: np.ndarray       # in the world frame [m]
     arrived: float           # node clock when it came [s]
 
 
@@ -224,9 +226,10 @@ class SunEstimatorNode(Node):
             self.get_logger().warning('spot with a NaN/inf centre: skipped')
             return
         frame = message.header.frame_id or 'world'
-        if frame == 'world':
-            centre = transform_points(self.rig.parameters.T_robot_world, centre)
-        elif frame != 'robot':
+        if frame == 'robot':
+            centre = transform_points(invert_transform(self.rig.parameters.T_robot_world),
+                                      centre)
+        elif frame != 'world':
             self.get_logger().warning(f"spot in frame '{frame}' (want world or robot): skipped")
             return
         self._pending.append(_Waiting(message.header.stamp, stamp_to_seconds(message.header.stamp),
@@ -272,11 +275,9 @@ class SunEstimatorNode(Node):
             self.get_logger().warning(f'spot skipped: {reason}', throttle_duration_sec=2.0)
 
     def _observe(self, spot, joints):
-        T_world = self.rig.parameters.T_robot_world
-        observation = Observation(spot.centre, self.rig.forward(joints).T_robot_lens,
-                                  T_world[:3, 3], T_world[:3, 2], self._parameter('centre_sigma'))
         sun = self._sun_at(stamp_to_nanoseconds(spot.stamp))
-        self._observations.append(_Buffered(spot.stamp, spot.seconds, observation, sun))
+        self._observations.append(_Buffered(spot.stamp, spot.seconds,
+                                            np.array(joints, dtype=float), spot.centre, sun))
         self._observations.sort(key=lambda b: b.seconds)
         del self._observations[:-self._parameter('max_observations')]
 
@@ -315,6 +316,7 @@ class SunEstimatorNode(Node):
             response.message = f'trust parameters refused: {error}'
             return response
         sigma = self._parameter('centre_sigma')
+        response.rig_calibration = self.rig.calibration_id
         options = {'max_iterations': self._parameter('max_iterations')}
         if method == 'interaction_matrix':
             options.update(gain=self._parameter('gain'), delta=self._parameter('delta'),
@@ -323,7 +325,7 @@ class SunEstimatorNode(Node):
         # gets its answer without a new fit; one that needs a fit while fits have taken more
         # than their budget of wall time is refused as busy (issue 35: a flood of requests).
         key = (method, tuple(b.seconds for b in buffered), repr(trust), sigma,
-               tuple(sorted(options.items())))
+               tuple(sorted(options.items())), self.rig.parameters)   # a calibration refits
         if self._last_answer is not None and self._last_answer[0] == key:
             _, response.success, response.message, estimate = self._last_answer
             response.estimate = copy.deepcopy(estimate)
@@ -364,9 +366,12 @@ class SunEstimatorNode(Node):
         reference_stamp = stamp_from_seconds(reference)
         anchor = self._sun_at(stamp_to_nanoseconds(reference_stamp))
         corrected = anchor is not None and all(b.sun is not None for b in buffered)
-        observations = [replace(b.observation, sigma=sigma, angle_offset=angle_offsets(
-            anchor, b.sun) if corrected else (0.0, 0.0)) for b in buffered]
+        T_world = self.rig.parameters.T_robot_world    # the present calibrations
         try:
+            observations = [Observation(
+                transform_points(T_world, b.centre), self.rig.forward(b.joints).T_robot_lens,
+                T_world[:3, 3], T_world[:3, 2], sigma,
+                angle_offsets(anchor, b.sun) if corrected else (0.0, 0.0)) for b in buffered]
             result = self.estimator.estimate(observations, method=method, trust=trust,
                                              **options)
         except ValueError as error:

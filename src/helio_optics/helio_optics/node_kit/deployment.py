@@ -19,6 +19,7 @@ from helio_optics.node_kit.parameters import declare
 from helio_optics.rig_kinematics import load_rig_parameters, Rig
 
 WORLD_CALIBRATION_TOPIC = 'calibration/world_pose'
+RIG_CALIBRATION_TOPIC = 'calibration/rig'
 RIG_FILE_PARAMETER = 'rig_file'
 LENS_FILE_PARAMETER = 'lens_file'
 SITE_FILE_PARAMETER = 'site_file'
@@ -67,14 +68,20 @@ def declare_site(node):
 
 def follow_world_calibration(node, rig, on_update=None):
     """
-    Keep `rig`'s T_robot_world on the robot-world calibration (``calibration/world_pose``).
+    Keep `rig` on the robot-world and rig calibrations (``calibration/world_pose``, ``/rig``).
 
     The lens planner publishes the transform it measured from the ArUco marker (paper
     Sec. II-B) with a transient-local QoS, so a node started later gets it too. A pose whose
     z axis is not vertical within 5 deg is refused with a warning (the rig model holds the
-    panel level). `on_update(rig)` is called after each change. Return the subscription.
+    panel level). The rig calibration (issue 28, ``helio_control.rig_calibration``) is a
+    std_msgs/String holding the YAML of the rig parameters it measured (flat names of
+    config/rig.yaml) and its ``calibration_id``; a malformed one is refused with a warning
+    and changes nothing.
+    `on_update(rig)` is called after each change. Return the two subscriptions.
     """
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import String
+    import yaml
 
     def apply(message):
         transform = pose_to_matrix(message.pose)
@@ -92,6 +99,21 @@ def follow_world_calibration(node, rig, on_update=None):
         if on_update is not None:
             on_update(rig)
 
+    def apply_rig(message):
+        try:
+            values = yaml.safe_load(message.data)
+            if not isinstance(values, dict):
+                raise ValueError(f'not a mapping of rig parameters: {message.data[:80]!r}')
+            identity = values.pop('calibration_id', '')
+            rig.apply_calibration(values, identity)
+        except (ValueError, TypeError, yaml.YAMLError) as error:
+            node.get_logger().warning(f'{RIG_CALIBRATION_TOPIC} ignored: {error}')
+            return
+        node.get_logger().info(f'rig calibration applied: {", ".join(sorted(values))}')
+        if on_update is not None:
+            on_update(rig)
+
     qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    return node.create_subscription(PoseStamped, WORLD_CALIBRATION_TOPIC, apply, qos)
+    return (node.create_subscription(PoseStamped, WORLD_CALIBRATION_TOPIC, apply, qos),
+            node.create_subscription(String, RIG_CALIBRATION_TOPIC, apply_rig, qos))
