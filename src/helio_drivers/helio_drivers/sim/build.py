@@ -63,7 +63,7 @@ class Tolerances:
     camera_focal: float = 0.005                  # focal length, relative [-]
     rgb_centre_px: float = 4.0                   # principal point, per axis [px]
     thermal_centre_px: float = 1.0               # [px] (160 x 120 pixels)
-    rgb_k1: float = 0.01                         # radial distortion k1 [-]
+    rgb_k1: float = 0.005                        # radial distortion k1 [-]
     thermal_k1: float = 0.005                    # [-]
     marker_scale: float = 0.005                  # printed size, relative [-]
     marker_offset: float = 0.003                 # the panel laid down by eye, per axis [m]
