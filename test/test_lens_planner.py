@@ -13,7 +13,9 @@ order a painting uses them:
 - ``calibrate_focus`` finds the distance of the world's smallest spot (8.2 cm);
 - ``focus`` puts the world's spot centre (``sim/truth/spot_centre``, the power centre of the
   concentrated light) on canvas targets across the paper's 5 cm offset canvas;
-- a cancel mid-move stops both devices at once.
+- a cancel mid-move stops both devices at once;
+- ``calibrate_rig`` finds the ideal build the rig file describes, and the sun estimator
+  estimates with the calibration it published.
 """
 
 import math
@@ -21,7 +23,9 @@ import time
 
 from conftest import graph_of_processes, wait_for_devices
 from geometry_msgs.msg import Point, PointStamped, PoseStamped, Vector3Stamped
-from helio_msgs.action import CalibrateFocus, CalibrateWorld, FocusLens, SweepSun
+from helio_msgs.action import CalibrateFocus, CalibrateRig, CalibrateWorld, FocusLens
+from helio_msgs.action import SweepSun
+from helio_msgs.srv import EstimateSun
 from helio_optics.node_kit.conversions import point_to_array, pose_to_matrix
 from helio_optics.node_kit.conversions import stamp_to_seconds
 from helio_optics.node_kit.in_process_graph import TRANSIENT_LOCAL_QOS
@@ -29,6 +33,7 @@ from helio_optics.rig_kinematics import default_rig_file
 import numpy as np
 import pytest
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 import yaml
 
 NODES = ('sim_world', 'dobot_driver', 'servo_driver', 'spot_detector', 'sun_estimator',
@@ -124,7 +129,8 @@ def planner(tmp_path_factory):
     overrides = {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000},
                  'spot_detector': rig, 'sun_estimator': {**rig, **site},
                  'lens_planner': {**rig, **site, 'joint_state_max_age': 0.01,
-                                  'calibration_dir': str(tmp_path / 'calibration')}}
+                                  'calibration_dir': str(tmp_path / 'calibration'),
+                                  'rig_calibration.spot_poses': 8}}
     with graph_of_processes(tmp_path, NODES, overrides) as (_, graph):
         yield Planner(graph)
 
@@ -232,3 +238,43 @@ def test_a_cancel_mid_move_stops_both_devices(planner):
     for later in planner.joints.messages[-6:]:
         if list(later.name) == list(first.name):
             assert np.allclose(later.position, first.position, atol=2e-3)
+
+
+def test_the_rig_calibration_finds_the_ideal_build_and_every_node_takes_it(planner):
+    """
+    Run calibrate_rig (issue 28) on the ideal build: the rig file's terms come back.
+
+    Its T_robot_world (5.4 mm and 2 deg off) is corrected, and the sun estimator's estimate
+    is made with the published calibration. Last in the module: it moves the rig model.
+    """
+    calibrations = planner.graph.collect(String, 'calibration/rig', TRANSIENT_LOCAL_QOS)
+    response = planner.run(CalibrateRig, 'calibrate_rig', CalibrateRig.Goal(poses=16,
+                                                                            apply=True))
+    result = response.result
+    print(f'\n{result.message}')
+    assert result.success, result.message
+    assert result.views_used >= 12 and result.spots_used >= 4
+    assert result.residual_position < 1e-3 and result.spot_residual < 5e-4
+    estimates = dict(zip(result.names, result.values))
+    # the world's truth: T_robot_world, and a build that is the rig file
+    truth = pose_to_matrix(planner.truth_world.wait_for_count(1)[-1].pose)
+    moved = np.linalg.norm(truth[:2, 3] - [estimates['world_in_robot[0]'],
+                                           estimates['world_in_robot[1]']])
+    turn = math.degrees(math.remainder(estimates['world_yaw']
+                                       - math.atan2(truth[1, 0], truth[0, 0]), 2 * math.pi))
+    print(f'against the world: marker {moved * 1e3:.2f} mm, {turn:.3f} deg; servo travel '
+          f"{estimates['joint_scales[3]']:.4f}, {estimates['joint_scales[4]']:.4f}")
+    assert moved < 1.5e-3 and abs(turn) < 0.3
+    assert estimates['joint_scales[3]'] == pytest.approx(1.0, abs=0.01)
+    assert abs(math.degrees(estimates['joint_offsets[3]'])) < 0.5
+    named = {line.split(':')[0] for line in result.unobserved}
+    assert {'joint_offsets[0]', 'lens_tilt', 'lens_offset[2]'} <= named
+    assert result.saved_to.endswith('rig_build.yaml')
+    # published once, and the estimate the lens planner made after it used it
+    identity = yaml.safe_load(calibrations.wait_for_count(1)[-1].data)['calibration_id']
+    client = planner.graph.helper.create_client(EstimateSun, 'estimate_sun')
+    assert planner.graph.call(client, EstimateSun.Request(), 60.0).rig_calibration == identity
+    sun = planner.truth_at(planner.truth_sun, stamp_to_seconds(result.estimate.header.stamp))
+    error = angle_deg(point_to_array(result.estimate.direction), point_to_array(sun.vector))
+    print(f'the sun estimated with it: {error:.3f} deg from the truth')
+    assert error < 0.5

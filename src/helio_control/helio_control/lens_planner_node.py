@@ -31,6 +31,7 @@ spot stream and node-clock timers; nothing blocks, and the node runs in a plain
 ``rclpy.spin`` (one thread).
 """
 
+from dataclasses import dataclass, replace
 import datetime
 import math
 import os
@@ -39,21 +40,21 @@ import traceback
 
 from action_msgs.msg import GoalStatus
 from geometry_msgs.msg import PoseStamped
-from helio_control import lens_moves, sun_sweep
+from helio_control import lens_moves, rig_calibration, sun_sweep
 from helio_control.calibration_store import CalibrationRefused, load_calibration
 from helio_control.calibration_store import rig_description, save_calibration
 from helio_control.focus_lease import FocusLease
 from helio_control.world_calibration import estimate_world_in_robot
-from helio_msgs.action import (CalibrateFocus, CalibrateWorld, FocusLens, MoveArm, MoveWrist,
-                               SweepSun)
+from helio_msgs.action import (CalibrateFocus, CalibrateRig, CalibrateWorld, FocusLens,
+                               MoveArm, MoveWrist, SweepSun)
 from helio_msgs.msg import FocalCalibration, LensPose, SpotObservation, SunEstimate
 from helio_msgs.srv import EstimateSun
-from helio_optics.ephemeris import sun_position
+from helio_optics.ephemeris import angle_offsets, sun_position
 from helio_optics.focal_calibration import calibrate_focus
 from helio_optics.focus_targeting import FocusTargeting
 from helio_optics.geometry import transform_points
 from helio_optics.node_kit import emergency_stop
-from helio_optics.node_kit.awaitables import discovered, FirstOf, sleep, within
+from helio_optics.node_kit.awaitables import discovered, FirstOf, in_thread, sleep, within
 from helio_optics.node_kit.conversions import array_to_point, camera_from_info
 from helio_optics.node_kit.conversions import matrix_to_pose, point_to_array, pose_to_matrix
 from helio_optics.node_kit.conversions import stamp_from_seconds, stamp_to_seconds
@@ -63,7 +64,8 @@ from helio_optics.node_kit.emergency_stop import EmergencyStopListener
 from helio_optics.node_kit.joint_states import JointStateBuffer
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
-from helio_optics.spot import spot_area_at
+from helio_optics.rig_kinematics import Rig
+from helio_optics.spot import spot_area_at, SpotModel
 from helio_perception.ground_plane import marker_view_angle
 import numpy as np
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
@@ -72,7 +74,8 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, JointState
-from std_msgs.msg import Header
+from std_msgs.msg import Header, String
+import yaml
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -196,6 +199,25 @@ class LensPlannerNode(Node):
         self.world_distance = declare(self, 'world_calibration.distance', 0.11,
                                       'Lens height over the panel while the marker is '
                                       'observed (the focus spread out) [m].', 0.05, 0.4)
+        self.rig_poses = declare(self, 'rig_calibration.poses', 48,
+                                 'Marker views of the rig calibration [-].', 12, 400)
+        self.rig_spot_poses = declare(self, 'rig_calibration.spot_poses', 24,
+                                      'Sweep poses whose spots fit the lens centre [-].', 4,
+                                      200)
+        self.rig_spot_tilts = declare(
+            self, 'rig_calibration.spot_tilts_deg', [0.0, 8.0, 16.0],
+            "Tilts of the lens axis off the sun in the rig calibration's sweep: wider than the "
+            "sun sweep's, so the lens centre's offset and the sun's direction show apart "
+            '[deg].')
+        self.rig_max_residual = (
+            declare(self, 'rig_calibration.max_residual_position', 0.001,
+                    'Refuse a rig calibration whose marker views miss the camera chain by '
+                    'more than this, rms [m].', 1e-5, 0.05),
+            declare(self, 'rig_calibration.max_residual_angle', math.radians(0.5),
+                    'The same for the camera orientation, rms [rad].', 1e-5, 0.5),
+            declare(self, 'rig_calibration.max_spot_residual', 0.0005,
+                    'Refuse it when the spots miss the lens-centre fit by more than this, rms '
+                    '[m].', 1e-5, 0.05))
         self.sweep_count = declare(self, 'sweep.poses', 6, 'Poses of the sun sweep [-].', 2,
                                    100)
         self.sweep_tilts = declare(self, 'sweep.tilts_deg', [0.0, 5.0, 10.0],
@@ -224,6 +246,9 @@ class LensPlannerNode(Node):
             'At start, read back the robot-world and focal calibrations saved in '
             'calibration_dir for this rig description, publish and use them.')
 
+        self.nominal_rig = self.rig.parameters      # the rig file's: a calibration's priors
+        self.rig_calibrated = False                 # a rig calibration applied (issue 28)
+        self.spot_model = SpotModel(self.lens)
         self.targeting = FocusTargeting(self.rig, self.lens, rays=self.focus_rays)
         self.world_calibrated = False      # T_robot_world measured: no marker needed
         follow_world_calibration(self, self.rig, self._calibrated)
@@ -248,6 +273,7 @@ class LensPlannerNode(Node):
                                                      LATCHED)
         self.focus_publisher = self.create_publisher(FocalCalibration, 'calibration/focus',
                                                      LATCHED)
+        self.rig_publisher = self.create_publisher(String, 'calibration/rig', LATCHED)
         lease_topic = declare(
             self, 'lease_topic', 'painter/heartbeat',
             'std_msgs/Header heartbeat of the client a focus at the heating distance is held '
@@ -272,6 +298,7 @@ class LensPlannerNode(Node):
         for action_type, name, execute in (
                 (FocusLens, 'focus', self._execute_focus),
                 (CalibrateWorld, 'calibrate_world', self._execute_calibrate_world),
+                (CalibrateRig, 'calibrate_rig', self._execute_calibrate_rig),
                 (SweepSun, 'sweep_sun', self._execute_sweep_sun),
                 (CalibrateFocus, 'calibrate_focus', self._execute_calibrate_focus)):
             ActionServer(self, action_type, name, self._guarded(action_type, execute),
@@ -290,7 +317,8 @@ class LensPlannerNode(Node):
 
     def _load_calibrations(self):
         """Read back, publish and use the calibrations saved for this rig (issue 30)."""
-        for name, use in (('robot_world.yaml', self._use_saved_world),
+        for name, use in (('rig_build.yaml', self._use_saved_rig),
+                          ('robot_world.yaml', self._use_saved_world),
                           ('focus.yaml', self._use_saved_focus)):
             try:
                 saved = load_calibration(self.calibration_dir, name, self.rig_description)
@@ -307,6 +335,19 @@ class LensPlannerNode(Node):
                 continue
             self.get_logger().info(f'calibration read back from {self.calibration_dir}/{name} '
                                    f'(saved {record.get("saved_at")}): {what}')
+
+    def _use_saved_rig(self, values):
+        self._publish_rig(values['rig'], values.get('calibration_id', 'saved'))
+        return f'the rig as built: {", ".join(sorted(values["rig"]))}'
+
+    def _publish_rig(self, flat, identity):
+        """Use a rig calibration's values and publish them on calibration/rig (latched)."""
+        self.rig.apply_calibration(flat, identity)
+        self.rig_calibrated = True
+        self.world_calibrated = True
+        self.rig_publisher.publish(String(data=yaml.safe_dump(
+            {**flat, 'calibration_id': identity}, sort_keys=True)))
+        self._publish_world(self.rig.parameters.world_in_robot, self.rig.parameters.world_yaw)
 
     def _use_saved_world(self, values):
         rig = values['rig']
@@ -657,33 +698,8 @@ class LensPlannerNode(Node):
                              'according to the rig file: check world_in_robot in the rig file '
                              'and the panel_extent parameter')
         feedback = CalibrateWorld.Feedback(total=len(poses))
-        robot_rgb, world_rgb = [], []
-        for index, x in enumerate(poses):
-            feedback.index, feedback.phase = index, 'moving'
-            goal_handle.publish_feedback(feedback)
-            await self._move(goal_handle, x)
-            feedback.phase = 'observing'
-            goal_handle.publish_feedback(feedback)
-            seen = await self._observe(goal_handle, self.observe_frames,
-                                       accept=_has_marker_pose)
-            if not seen:
-                self.get_logger().warning(f'pose {index}: no marker pose seen')
-                continue
-            for message in seen:     # every frame's marker pose: their noise averages out
-                # the joints when the marker's image was taken (the detector reuses a pose
-                # while the joints stay within its tolerance), not those the move reported
-                # on arrival: a servo arrives within 1 us (about 0.1 deg, i.e. 0.25 mm on a
-                # marker 15 cm away) and settles after
-                taken = stamp_to_seconds(message.header.stamp) - message.marker_pose_age
-                lookup = self.joints.at(taken, self.joint_state_tolerance)
-                if not lookup:
-                    self.get_logger().warning(f'pose {index}: a marker pose skipped: '
-                                              f'{lookup.reason}')
-                    continue
-                robot_rgb.append(self.rig.forward(lookup.positions).T_robot_rgb)
-                world_rgb.append(pose_to_matrix(message.camera_pose))
-            feedback.poses_used = len(robot_rgb)
-            goal_handle.publish_feedback(feedback)
+        joints, world_rgb, _ = await self._marker_views(goal_handle, poses, feedback)
+        robot_rgb = [self.rig.forward(x).T_robot_rgb for x in joints]
         try:
             estimate = estimate_world_in_robot(robot_rgb, world_rgb)
         except ValueError as error:
@@ -717,6 +733,182 @@ class LensPlannerNode(Node):
             f'{result.shift_from_rig_file * 1000:.2f} mm and '
             f'{math.degrees(result.turn_from_rig_file):.3f} deg from the rig file'
             + ('' if goal_handle.request.apply else ' (not applied)'))
+
+    async def _marker_views(self, goal_handle, poses, feedback):
+        """
+        Visit `poses`; return (reported joints, T_world_rgb, pose index) of each marker pose.
+
+        Each frame's marker pose is paired with the joints when its image was taken (the
+        detector reuses a pose while the joints stay within its tolerance), not those the
+        move reported on arrival: a servo arrives within 1 us (about 0.1 deg, i.e. 0.25 mm
+        on a marker 15 cm away) and settles after. `feedback` (with index, phase and,
+        where it has it, poses_used) is published as it goes.
+        """
+        joints, world_rgb, indices = [], [], []
+        for index, x in enumerate(poses):
+            feedback.index, feedback.phase = index, 'moving'
+            goal_handle.publish_feedback(feedback)
+            await self._move(goal_handle, x)
+            feedback.phase = 'observing'
+            goal_handle.publish_feedback(feedback)
+            seen = await self._observe(goal_handle, self.observe_frames,
+                                       accept=_has_marker_pose)
+            if not seen:
+                self.get_logger().warning(f'pose {index}: no marker pose seen')
+                continue
+            for message in seen:     # every frame's marker pose: their noise averages out
+                taken = stamp_to_seconds(message.header.stamp) - message.marker_pose_age
+                lookup = self.joints.at(taken, self.joint_state_tolerance)
+                if not lookup:
+                    self.get_logger().warning(f'pose {index}: a marker pose skipped: '
+                                              f'{lookup.reason}')
+                    continue
+                joints.append(np.asarray(lookup.positions, dtype=float))
+                world_rgb.append(pose_to_matrix(message.camera_pose))
+                indices.append(index)
+            if hasattr(feedback, 'poses_used'):
+                feedback.poses_used = len(joints)
+            goal_handle.publish_feedback(feedback)
+        return joints, world_rgb, indices
+
+    # ---- rig calibration (issue 28) ------------------------------------------------------
+
+    async def _execute_calibrate_rig(self, goal_handle, result):
+        request = goal_handle.request
+        started = self._now()
+        camera = await self._need_camera()
+        feedback = CalibrateRig.Feedback()
+        # the rig file is the prior; T_robot_world the best one known (a saved calibration)
+        world = (self.rig.parameters.world_in_robot, self.rig.parameters.world_yaw)
+        belief = Rig(replace(self.nominal_rig, world_in_robot=world[0], world_yaw=world[1]))
+        # over the marker and the panel points near it, the focus spread out (the lens at
+        # least the robot-world calibration's height over the panel)
+        points = [(0.0, 0.0)] + [p for p in self.view_points if math.hypot(*p) <= 0.08]
+        poses = rig_calibration.marker_view_poses(
+            belief, camera, self.marker_side, points, request.poses or self.rig_poses,
+            distances=(self.world_distance, self.world_distance + 0.03),
+            margin=self.view_margin)
+        if len(poses) < 12:
+            raise GoalFailed(f'only {len(poses)} poses show the whole marker to the camera '
+                             'according to the rig file (12 needed): check world_in_robot in '
+                             'the rig file and the panel_extent parameter')
+        feedback.total = len(poses)
+        joints, world_rgb, indices = await self._marker_views(goal_handle, poses, feedback)
+        feedback.phase = 'fitting the camera chain'
+        goal_handle.publish_feedback(feedback)
+        try:
+            if len(joints) < 3:
+                raise ValueError(f'{len(joints)} marker views: at least 3 are needed')
+            joints, world_rgb = rig_calibration.mean_views(joints, world_rgb, indices)
+            chain = await in_thread(self, rig_calibration.fit_camera_chain, self.nominal_rig,
+                                    joints, world_rgb, rig_calibration.CAMERA_CHAIN, 3e-4,
+                                    math.radians(0.15), 6.0, world)
+        except ValueError as error:
+            raise GoalFailed(f'rig calibration failed: {error}') from None
+        result.views_used = chain.used
+        result.residual_position, result.residual_angle = (chain.residual_position,
+                                                           chain.residual_angle)
+        max_position, max_angle, max_spot = self.rig_max_residual
+        if chain.residual_position > max_position or chain.residual_angle > max_angle:
+            raise GoalFailed(
+                f'rig calibration refused: the marker views miss the camera chain by '
+                f'{chain.residual_position * 1000:.2f} mm and '
+                f'{math.degrees(chain.residual_angle):.2f} deg rms (bounds '
+                f'{max_position * 1000:.2f} mm, {math.degrees(max_angle):.2f} deg): the '
+                'marker moved, or the build is off beyond what the model holds')
+        before = self.rig.parameters
+        self.rig.set_parameters(chain.parameters)      # the sweep plans with the chain
+        try:
+            feedback.phase = 'spot sweep'
+            sweep = await self._sweep(goal_handle, feedback, '', self.rig_spot_poses,
+                                      self.rig_spot_tilts)
+            if len(sweep.spots) < 4:
+                raise GoalFailed(f'rig calibration failed: {len(sweep.spots)} still spots in '
+                                 'the sweep, 4 needed (clouds? the marker out of view?)')
+            feedback.phase = 'fitting the lens centre'
+            goal_handle.publish_feedback(feedback)
+            lens = await self._fit_lens_centre(chain.parameters, sweep)
+        except BaseException:
+            self.rig.set_parameters(before)
+            raise
+        result.spots_used = lens.used
+        result.spot_residual = lens.residual_position
+        if lens.residual_position > max_spot:
+            self.rig.set_parameters(before)
+            raise GoalFailed(f'rig calibration refused: the spots miss the lens-centre fit by '
+                             f'{lens.residual_position * 1000:.2f} mm rms (bound '
+                             f'{max_spot * 1000:.2f} mm)')
+        estimates = chain.estimates + lens.estimates
+        result.names = [e.name for e in estimates]
+        result.values = [e.value for e in estimates]
+        result.rig_file = [e.prior for e in estimates]
+        result.sigmas = [e.std for e in estimates]
+        unobserved = {**chain.unobserved, **lens.unobserved}
+        result.unobserved = [f'{name}: {why}' for name, why in sorted(unobserved.items())]
+        flat = rig_calibration.build_terms(lens.parameters)
+        if request.apply:
+            identity = f'{self._now():.3f}'
+            self._publish_rig(flat, identity)
+            result.saved_to = self._save('rig_build.yaml', {'rig': flat,
+                                                            'calibration_id': identity}, {
+                'residual_position_m': chain.residual_position,
+                'residual_angle_rad': chain.residual_angle,
+                'spot_residual_m': lens.residual_position,
+                'views_used': chain.used, 'spots_used': lens.used,
+                'unobserved': result.unobserved})
+            # the sun again, from the same spots with the calibrated rig, once the estimator
+            # has it (its response names the rig calibration its lens poses came from)
+            deadline = time.monotonic() + self.server_timeout
+            response = await self._estimate('', sweep.start)
+            while response.rig_calibration != identity and time.monotonic() < deadline:
+                await sleep(self, 0.1, wall=True)
+                response = await self._estimate('', sweep.start)
+            if response.rig_calibration != identity:
+                raise GoalFailed('rig calibration applied, but the sun estimator did not take '
+                                 f'it within {self.server_timeout:g} s: its estimate used the '
+                                 f'rig calibration {response.rig_calibration!r}')
+            if response.success:
+                self.sun = response.estimate
+            result.estimate = response.estimate
+        else:
+            self.rig.set_parameters(before)
+        result.rig_time = self._now() - started
+        result.message = (
+            f'rig calibrated from {chain.used} marker views and {lens.used} spots in '
+            f'{result.rig_time:.0f} s: camera chain rms {chain.residual_position * 1000:.2f} '
+            f'mm, {math.degrees(chain.residual_angle):.2f} deg; spots rms '
+            f'{lens.residual_position * 1000:.2f} mm; {len(unobserved)} terms not observed'
+            + ('' if request.apply else ' (not applied)'))
+        self.get_logger().info(result.message + '\n  ' + '\n  '.join(
+            chain.table() + lens.table()))
+
+    async def _fit_lens_centre(self, parameters, sweep):
+        """Fit the lens centre to a sweep's still spots (Eq 18 offsets from its middle)."""
+        times = [spot[0] for spot in sweep.spots]
+        middle = 0.5 * (min(times) + max(times))
+        anchor = sun_position(self.site, _utc(middle))
+        offsets = [angle_offsets(anchor, sun_position(self.site, _utc(t))) for t in times]
+        guess = point_to_array(sweep.response.estimate.direction)
+        if not (np.all(np.isfinite(guess)) and guess[2] < 0.0):
+            raise GoalFailed('rig calibration failed: the sweep gave no sun to start from: '
+                             f'{sweep.response.message}')
+
+        def spot_model(rays, T_robot_lens, T_robot_world):
+            count = len(rays)
+            centres = self.spot_model.centres(
+                rays, T_robot_lens, np.repeat(T_robot_world[None, :3, 3], count, axis=0),
+                np.repeat(T_robot_world[None, :3, 2], count, axis=0))
+            return transform_points(np.linalg.inv(T_robot_world), centres)[:, :2]
+
+        def fit():
+            return rig_calibration.fit_lens_centre(
+                parameters, [spot[1] for spot in sweep.spots], [spot[2] for spot in sweep.spots],
+                guess, offsets, spot_model=spot_model)
+
+        try:
+            return await in_thread(self, fit)
+        except ValueError as error:
+            raise GoalFailed(f'rig calibration failed: {error}') from None
 
     def _marker_poses(self, camera, count):
         """Poses high over the canvas from which the camera sees the marker (rig file)."""
@@ -767,11 +959,37 @@ class LensPlannerNode(Node):
 
     async def _execute_sweep_sun(self, goal_handle, result):
         request = goal_handle.request
+        sweep = await self._sweep(goal_handle, SweepSun.Feedback(), request.method,
+                                  request.poses or self.sweep_count)
+        result.estimate = sweep.response.estimate
+        result.poses_used, result.observations = sweep.used, sweep.observations
+        if not sweep.response.success:
+            raise GoalFailed(f'estimate_sun after the sweep: {sweep.response.message}')
+        self.sun = sweep.response.estimate
+        result.message = (f'{sweep.used} of {sweep.planned} sweep poses saw the spot, '
+                          f'{sweep.observations} observations: {sweep.response.message}')
+
+    async def _sweep(self, goal_handle, feedback, method, count, tilts=None):
+        """
+        Find the spot when there is no sun estimate, sweep `count` poses, estimate the sun.
+
+        `tilts` [deg] of the lens axis off the sun (default the ``sweep.tilts_deg``).
+
+        Return a ``_Sweep``: the estimate_sun response, the poses planned and used, the
+        observations, the still valid spots of the sweep's holds (image time, reported
+        joints, world centre) and when the sweep began (node clock).
+        """
         camera = await self._need_camera()
         T_robot_world = self.rig.parameters.T_robot_world
-        feedback = SweepSun.Feedback()
         observations = 0
         sun = None if self.sun is None else point_to_array(self.sun.direction)
+
+        def report(**fields):
+            for name, value in fields.items():
+                if hasattr(feedback, name):
+                    setattr(feedback, name, value)
+            goal_handle.publish_feedback(feedback)
+
         if sun is None:
             elevation = sun_position(self.site, _utc(self._now())).elevation
             if elevation <= math.radians(5.0):
@@ -786,19 +1004,17 @@ class LensPlannerNode(Node):
             if not candidates:
                 raise GoalFailed('no pose to look for the spot: the view points are out of '
                                  'reach or out of the camera view for this sun elevation')
-            feedback.phase, feedback.total = 'acquiring', len(candidates)
             for index, (azimuth, x) in enumerate(candidates):
-                feedback.index = index
-                goal_handle.publish_feedback(feedback)
+                report(phase='acquiring', total=len(candidates), index=index)
                 await self._move(goal_handle, x)
                 held_since = self._now()
                 seen = await self._observe(goal_handle, self.observe_frames)
                 observations += len(seen)
-                feedback.observations = observations
+                report(observations=observations)
                 if seen:
                     # a coarse sun is enough to choose the sweep: one pose's estimate may be
                     # ambiguous (a twin sun), which the tilted sweep then settles
-                    response = await self._estimate(request.method, held_since)
+                    response = await self._estimate(method, held_since)
                     if response.estimate.converged:
                         sun = point_to_array(response.estimate.direction)
                         self.get_logger().info(
@@ -809,17 +1025,15 @@ class LensPlannerNode(Node):
                 raise GoalFailed(f'the spot was not found at any of {len(candidates)} azimuth '
                                  'guesses (clouds? the camera? the marker?)')
         poses = sun_sweep.sweep_poses(self.rig, T_robot_world, sun, camera, self.marker_side,
-                                      self.view_points, request.poses or self.sweep_count,
-                                      tuple(self.sweep_tilts),
+                                      self.view_points, count,
+                                      tuple(self.sweep_tilts if tilts is None else tilts),
                                       tuple(self.sweep_distances), self.view_margin,
                                       need_marker=not self.world_calibrated)
         if len(poses) < 2:
             raise GoalFailed(f'only {len(poses)} sweep poses show the marker and the spot')
-        feedback.phase, feedback.total = 'sweeping', len(poses)
-        used = 0
+        used, spots = 0, []
         for index, x in enumerate(poses):
-            feedback.index = index
-            goal_handle.publish_feedback(feedback)
+            report(phase='sweeping', total=len(poses), index=index)
             await self._move(goal_handle, x)
             if index == 0:
                 # the estimate is of the sweep's holds only: an acquisition pose far from the
@@ -829,17 +1043,17 @@ class LensPlannerNode(Node):
             seen = await self._observe(goal_handle, self.observe_frames)
             observations += len(seen)
             used += bool(seen)
-            feedback.observations = observations
-        feedback.phase = 'estimating'
-        goal_handle.publish_feedback(feedback)
-        response = await self._estimate(request.method, sweep_start)
-        result.estimate = response.estimate
-        result.poses_used, result.observations = used, observations
-        if not response.success:
-            raise GoalFailed(f'estimate_sun after the sweep: {response.message}')
-        self.sun = response.estimate
-        result.message = (f'{used} of {len(poses)} sweep poses saw the spot, {observations} '
-                          f'observations: {response.message}')
+            for message in seen:
+                taken = stamp_to_seconds(message.header.stamp)
+                lookup = self.joints.at(taken, self.joint_state_tolerance)
+                if lookup and message.quality == SpotObservation.FULL and \
+                        message.header.frame_id in ('', 'world'):
+                    spots.append((taken, np.asarray(lookup.positions, dtype=float),
+                                  point_to_array(message.center)[:2]))
+            report(observations=observations)
+        report(phase='estimating')
+        response = await self._estimate(method, sweep_start)
+        return _Sweep(response, len(poses), used, observations, spots, sweep_start)
 
     # ---- focal calibration ------------------------------------------------------------------
 
@@ -940,8 +1154,23 @@ class LensPlannerNode(Node):
         scale = heating_distance / model_best if model_best > 0 else 1.0
         self.lens = type(self.lens)(**{**self.lens.__dict__,
                                        'focal_length': self.lens.focal_length * scale})
+        self.nominal_rig = self.rig.parameters      # the rig file's: a calibration's priors
+        self.rig_calibrated = False                 # a rig calibration applied (issue 28)
+        self.spot_model = SpotModel(self.lens)
         self.targeting = FocusTargeting(self.rig, self.lens, rays=self.focus_rays)
         self.heating_distance = heating_distance
+
+
+@dataclass
+class _Sweep:
+    """What a sun sweep gave (``LensPlannerNode._sweep``)."""
+
+    response: object        # EstimateSun.Response
+    planned: int
+    used: int
+    observations: int
+    spots: list             # (image time [s], reported joints (5,), world centre (2,))
+    start: float            # node clock [s]
 
 
 def _model_best_distance(lens, around):

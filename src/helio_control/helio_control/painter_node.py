@@ -3,8 +3,12 @@ Node painter: Algorithm 1 of the paper as the ``paint`` action (helio_msgs/Paint
 
 Per goal (paper Sec. IV-B and IV-C, Algorithm 1):
 
-1. robot-world calibration (``calibrate_world`` of the lens planner; once per node, or
-   every goal, by parameter) and, without a sun estimate, the sun sweep (``sweep_sun``);
+1. the rig calibration (``calibrate_rig`` of the lens planner, issue 28: the build's
+   errors measured from the marker and the spot) when asked by ``calibrate_rig``
+   (``missing``: no calibration of the rig as built has come on ``calibration/rig``;
+   ``always``; ``never``, the default until it places as well as the paper), else the
+   robot-world calibration (``calibrate_world``; once per node, or every goal, by
+   parameter); without a sun estimate, the sun sweep (``sweep_sun``);
 2. the plan (``helio_control.plan``): the picture (or the goal's points) to ordered world
    dots with per-dot N_p targets, checked against the rig's reach for the estimated sun;
 3. per dot: ``focus`` at the heating distance (the focal calibration's, ``calibration/focus``,
@@ -70,7 +74,8 @@ from helio_control.picture_input import picture_from_image_msg, PictureError
 from helio_control.plan import options_from_goal, Plan, plan_dots, plan_picture
 from helio_control.plan import PlanError, PlanOptionsError
 from helio_control.run_journal import goal_to_dict, JournalError, JournalWriter, read_journal
-from helio_msgs.action import CalibrateWorld, FocusLens, MoveArm, MoveWrist, PaintPattern
+from helio_msgs.action import CalibrateRig, CalibrateWorld, FocusLens, MoveArm, MoveWrist
+from helio_msgs.action import PaintPattern
 from helio_msgs.action import SweepSun
 from helio_msgs.msg import DeviceStatus, FocalCalibration, SpotObservation, SunEstimate
 from helio_msgs.msg import ThermalStats
@@ -226,6 +231,12 @@ class PainterNode(Node):
                                        "Robot-world calibration before a painting: 'once' per "
                                        "node, 'always', or 'never'.",
                                        choices=('once', 'always', 'never'))
+        self.calibrate_rig = declare(self, 'calibrate_rig', 'never',
+                                     "Rig calibration before a painting: 'missing' (when no "
+                                     'calibration of the rig as built has come on '
+                                     "calibration/rig), 'always', or 'never' (the rig file "
+                                     'and the robot-world calibration only).',
+                                     choices=('missing', 'always', 'never'))
         self.server_timeout = declare(self, 'server_timeout', 60.0,
                                       'Wait at most this long for the lens planner (wall) [s].',
                                       0.1, 3600.0)
@@ -310,6 +321,7 @@ class PainterNode(Node):
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.focus = ActionClient(self, FocusLens, 'focus')
         self.world = ActionClient(self, CalibrateWorld, 'calibrate_world')
+        self.rig_calibration = ActionClient(self, CalibrateRig, 'calibrate_rig')
         self.sweep = ActionClient(self, SweepSun, 'sweep_sun')
         self.wrist = ActionClient(self, MoveWrist, 'move_wrist')
         self.arm = ActionClient(self, MoveArm, 'move_arm')   # the lift when the wrist is down
@@ -643,9 +655,25 @@ class PainterNode(Node):
             raise PaintFailed('device fault: ' + '; '.join(faults))
 
     async def _prepare(self, goal_handle, feedback):
-        """Calibrate the world and estimate the sun when needed (Algorithm 1 lines 1-2)."""
-        if self.calibrate_world == 'always' or (self.calibrate_world == 'once'
-                                                and not self.world_calibrated):
+        """Calibrate the rig or the world, estimate the sun when needed (Alg. 1 lines 1-2)."""
+        if self.calibrate_rig == 'always' or (self.calibrate_rig == 'missing'
+                                              and not self.rig.calibrations_applied):
+            feedback.phase = 'calibrating'
+            goal_handle.publish_feedback(feedback)
+            taken = self.rig.calibrations_applied
+            rig = await self._run_action(self.rig_calibration, 'calibrate_rig',
+                                         CalibrateRig.Goal(apply=True))
+            if not rig.success:
+                raise PaintFailed(f'rig calibration failed: {rig.message}')
+            # planned with the calibrated rig only: its calibration/rig message may come
+            # after the result
+            await discovered(self, lambda: self.rig.calibrations_applied > taken,
+                             self.server_timeout, 'the rig calibration on calibration/rig')
+            self.world_calibrated = True
+            if rig.estimate.converged and not rig.estimate.ambiguous:
+                self.sun = rig.estimate
+        elif self.calibrate_world == 'always' or (self.calibrate_world == 'once'
+                                                  and not self.world_calibrated):
             feedback.phase = 'calibrating'
             goal_handle.publish_feedback(feedback)
             world = await self._run_action(self.world, 'calibrate_world',

@@ -40,6 +40,7 @@ from helio_control.sun_sweep import in_view, marker_corners, spread, tilted_axis
 from helio_optics.geometry import angles_from_direction, direction_from_angles
 from helio_optics.geometry import invert_transform, transform_points, unit
 from helio_optics.rig_kinematics import Rig
+from helio_perception.ground_plane import marker_view_angle
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
@@ -337,17 +338,40 @@ def fit_lens_centre(parameters, joints, spots, sun_guess, angle_offsets=None,
                   sun_direction=direction_from_angles(*solution.x[-2:]))
 
 
+def mean_views(joints, T_world_rgb, groups):
+    """
+    Return one view per group: the mean joints and camera pose of a pose's frames.
+
+    The frames of one still pose measure the same camera pose; their mean (positions
+    averaged, orientations by the chordal mean) halves the noise of four frames and makes the
+    fit four times cheaper. `groups` (N,) labels each view with its pose.
+    """
+    joints, T_world_rgb = _check_views(joints, T_world_rgb, 'camera poses')
+    groups = np.asarray(groups)
+    mean_joints, mean_poses = [], []
+    for group in dict.fromkeys(groups.tolist()):
+        members = np.flatnonzero(groups == group)
+        pose = np.eye(4)
+        pose[:3, 3] = T_world_rgb[members, :3, 3].mean(axis=0)
+        pose[:3, :3] = Rotation.from_matrix(T_world_rgb[members, :3, :3]).mean().as_matrix()
+        mean_joints.append(joints[members].mean(axis=0))
+        mean_poses.append(pose)
+    return np.array(mean_joints), np.array(mean_poses)
+
+
 def marker_view_poses(rig, camera, marker_side, points, count, distances=(0.10, 0.14),
                       tilts=(0.0, 20.0, 35.0), azimuths=8, wrist_turns=(0.0, 1.2, -1.2),
-                      margin=30.0):
+                      margin=30.0, max_view_angle=math.radians(50.0)):
     """
     Return up to `count` joint vectors from which the RGB camera sees the whole marker.
 
     Chosen for the camera chain's observability: over the view `points` (world x, y),
     lens axes tilted `tilts` [deg] off the vertical towards `azimuths` directions, at
     `distances` [m] above the point, each with the wrist turned by `wrist_turns` [rad] (the
-    same axis reached with another yaw, the servo's zero and scale then show). Spread over
-    the candidates (any prefix covers them), by the rig model's belief of where the marker is.
+    same axis reached with another yaw, the servo's zero and scale then show), the marker
+    seen at most `max_view_angle` off its normal (the spot detector refuses slanted views;
+    a build's error must not push a view past its 60 deg). Spread over the candidates (any
+    prefix covers them), by the rig model's belief of where the marker is.
     """
     T_robot_world = rig.parameters.T_robot_world
     T_world_robot = invert_transform(T_robot_world)
@@ -367,7 +391,8 @@ def marker_view_poses(rig, camera, marker_side, points, count, distances=(0.10, 
                         except ValueError:
                             continue
                         T_world_rgb = T_world_robot @ rig.forward(x).T_robot_rgb
-                        if in_view(camera, T_world_rgb, corners, margin):
+                        if marker_view_angle(T_world_rgb) <= max_view_angle and \
+                                in_view(camera, T_world_rgb, corners, margin):
                             candidates.append(x)
     unique = []
     for x in candidates:

@@ -11,7 +11,7 @@ import math
 
 from helio_control.rig_calibration import (build_terms, CALIBRATED_FIELDS, chief_ray_centres,
                                            fit_camera_chain, fit_lens_centre,
-                                           marker_view_poses, UNOBSERVED)
+                                           marker_view_poses, mean_views, UNOBSERVED)
 from helio_drivers.sim.build import BuiltRig, draw_build
 from helio_optics.geometry import invert_transform, PinholeCamera, transform_points
 from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters, Rig
@@ -179,3 +179,24 @@ def test_too_few_or_malformed_views_are_refused_with_the_reason():
         fit_camera_chain(nominal(), np.full((4, 5), np.nan), np.tile(np.eye(4), (4, 1, 1)))
     with pytest.raises(ValueError, match='at least 4'):
         fit_lens_centre(nominal(), np.zeros((3, 5)), np.zeros((3, 2)), [0.0, 0.0, -1.0])
+
+
+def test_the_frames_of_a_pose_average_to_one_view():
+    rng = np.random.default_rng(7)
+    base = np.eye(4)
+    base[:3, :3] = Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix()
+    base[:3, 3] = [0.01, 0.02, 0.12]
+    joints, poses, groups = [], [], []
+    for group, shift in ((0, 0.0), (1, 0.05)):
+        for turn in (-0.01, 0.01):     # two frames turned either way about x, moved either way
+            pose = base.copy()
+            pose[:3, :3] = base[:3, :3] @ Rotation.from_rotvec([turn, 0.0, 0.0]).as_matrix()
+            pose[:3, 3] += [shift + turn, 0.0, 0.0]
+            joints.append(np.full(5, shift) + rng.normal(0.0, 1e-4, 5))
+            poses.append(pose)
+            groups.append(group)
+    mean_joints, mean_poses = mean_views(joints, poses, groups)
+    assert mean_joints.shape == (2, 5) and mean_poses.shape == (2, 4, 4)
+    assert mean_poses[0] == pytest.approx(base, abs=1e-9)       # the turns cancel
+    assert mean_poses[1][:3, 3] == pytest.approx(base[:3, 3] + [0.05, 0.0, 0.0])
+    assert mean_joints[1] == pytest.approx(np.full(5, 0.05), abs=3e-4)
