@@ -12,6 +12,7 @@ The ``helio`` command: run the graph, paint, record, replay, report.
     helio report RUN_DIR
     helio udev [--install]                           (the serial devices' udev rule)
     helio calibrations [--dir DIR] [--rig FILE]      (what is saved, and for which rig)
+    helio calibrate rig|world [--poses N] [--no-apply]   (run one on the running graph)
     helio doctor [--namespace NS] [--window S] ...   (the rig's checklist, a fix for each)
     helio stop [--namespace NS]                      (the emergency stop)
     helio sky [--date D] [--heading DEG] [--site FILE] [options]   (when the sun serves)
@@ -633,6 +634,25 @@ def build_parser(action_type=None):
     calibrations.add_argument('--rig', help="rig file (default: the workspace's config/rig.yaml)")
     calibrations.set_defaults(handler=command_calibrations)
 
+    calibrate = commands.add_parser(
+        'calibrate', help='run a calibration of the lens planner on the running graph',
+        description="Send the calibration goal to the running graph's lens planner, print "
+        'its progress and result. "rig": the build errors from the marker and the spot '
+        '(CalibrateRig, about 5 minutes of rig time; each fitted term with its rig-file '
+        'value and uncertainty, and the terms the poses cannot see); "world": T_robot_world '
+        'from the marker (CalibrateWorld). Exit 1 when it fails or is refused.')
+    calibrate.add_argument('what', choices=('rig', 'world'), help='which calibration')
+    calibrate.add_argument('--poses', type=_non_negative_int, default=0,
+                           help="poses to visit (0: the lens planner's parameter)")
+    calibrate.add_argument('--no-apply', action='store_true',
+                           help='measure only: do not publish or save the result')
+    calibrate.add_argument('--namespace', default='', help='namespace of the graph')
+    calibrate.add_argument('--connect-timeout', type=_finite_float, default=10.0,
+                           help='seconds to wait for the lens planner')
+    calibrate.add_argument('--timeout', type=_finite_float, default=1800.0,
+                           help='longest wait for the result [s]')
+    calibrate.set_defaults(handler=command_calibrate)
+
     doctor = commands.add_parser(
         'doctor', help='check a running graph: a checklist with a fix for each finding',
         description='Listen to the running graph for a few seconds and check it: devices '
@@ -834,6 +854,49 @@ def command_calibrations(arguments):
         print(f'  {entry["name"]}: saved {entry.get("saved_at", "?")} by '
               f'{entry.get("made_by", "?")}{"; " + extra if extra else ""}; {state}')
     return EXIT_OK if all(entry['usable'] for entry in entries) else EXIT_FAILED
+
+
+def command_calibrate(arguments):
+    """Run calibrate_rig or calibrate_world on the running graph; print the result."""
+    from helio_msgs.action import CalibrateRig, CalibrateWorld
+    from helio_optics.node_kit.in_process_graph import GraphTimeout, InProcessGraph
+    from rclpy.action import ActionClient
+    action_type, name = {'rig': (CalibrateRig, 'calibrate_rig'),
+                         'world': (CalibrateWorld, 'calibrate_world')}[arguments.what]
+    goal = action_type.Goal(poses=arguments.poses, apply=not arguments.no_apply)
+    with InProcessGraph('helio_calibrate', namespace=arguments.namespace) as graph:
+        client = ActionClient(graph.helper, action_type, name)
+        if not client.wait_for_server(timeout_sec=arguments.connect_timeout):
+            raise CommandError(f'no lens planner answers on '
+                               f'{graph.helper.resolve_topic_name(name)} within '
+                               f'{arguments.connect_timeout:g} s: start the graph ("helio '
+                               'rig" or "helio sim")')
+        last = {}
+
+        def progress(message):
+            feedback = message.feedback
+            if (feedback.phase, feedback.index) != (last.get('phase'), last.get('index')):
+                last.update(phase=feedback.phase, index=feedback.index)
+                print(f'[helio] {feedback.phase} {feedback.index + 1}/{feedback.total}',
+                      file=sys.stderr, flush=True)
+
+        try:
+            response = graph.run_goal(client, goal, progress, arguments.timeout)
+        except GraphTimeout:
+            raise CommandError(f'{name} gave no result within {arguments.timeout:g} s') \
+                from None
+    result = response.result
+    print(result.message)
+    for term, value, prior, sigma in zip(getattr(result, 'names', ()),
+                                         getattr(result, 'values', ()),
+                                         getattr(result, 'rig_file', ()),
+                                         getattr(result, 'sigmas', ())):
+        print(f'  {term}: {value:.6g} (rig file {prior:.6g}, +- {sigma:.2g})')
+    for line in getattr(result, 'unobserved', ()):
+        print(f'  not observed: {line}')
+    if result.saved_to:
+        print(f'saved to {result.saved_to}')
+    return EXIT_OK if result.success else EXIT_FAILED
 
 
 def command_doctor(arguments):

@@ -12,6 +12,7 @@ import math
 from helio_control.rig_calibration import (build_terms, CALIBRATED_FIELDS, chief_ray_centres,
                                            fit_camera_chain, fit_lens_centre,
                                            marker_view_poses, mean_views, UNOBSERVED)
+from helio_control.sun_sweep import view_points
 from helio_drivers.sim.build import BuiltRig, draw_build
 from helio_optics.geometry import invert_transform, PinholeCamera, transform_points
 from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters, Rig
@@ -20,7 +21,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 CAMERA = PinholeCamera.from_fov(640, 480, math.radians(70.0))
-VIEW_POINTS = ((0.0, 0.0), (0.03, 0.0), (0.0, 0.03), (-0.02, 0.02), (0.03, 0.03))
+# the lens planner's: over the marker and the default panel's points within 8 cm of it
+VIEW_POINTS = [(0.0, 0.0)] + [p for p in view_points() if math.hypot(*p) <= 0.08]
 NOMINAL_US_PER_RAD = 2000.0 / math.pi
 SUN_WORLD = np.array([0.35, 0.45, -0.82]) / np.linalg.norm([0.35, 0.45, -0.82])
 
@@ -46,7 +48,8 @@ def marker_views(build, count=48, seed=0):
     world = BuiltRig(build)
     T_world_robot = invert_transform(build.rig.T_robot_world)
     joints, poses = [], []
-    for x in marker_view_poses(Rig(nominal()), CAMERA, 0.04, VIEW_POINTS, count):
+    for x in marker_view_poses(Rig(nominal()), CAMERA, 0.04, VIEW_POINTS, count,
+                               distances=(0.11, 0.14)):
         T = T_world_robot @ world.forward(true_joints(build, x)).T_robot_rgb
         T[:3, 3] += rng.normal(0.0, 2e-4, 3)
         T[:3, :3] = Rotation.from_rotvec(rng.normal(0.0, math.radians(0.1), 3)).as_matrix() \
