@@ -14,10 +14,12 @@ each a robust nonlinear least squares (``scipy.optimize.least_squares``, soft-L1
    T_robot_world (4), the Dobot's j2, j3 zeros, both servos' zero and scale, the yaw and
    pitch axes' horizontal offsets, the RGB camera's position and turn in its mount.
 2. **The lens centre** (``fit_lens_centre``): at each still pose the spot's centre on the
-   panel (world frame) lies where the sun ray through the lens centre meets it (the chief
-   ray goes straight through the lens: Eq 14 read backwards). Fitted: the lens centre
-   across its axis in the holder (2) and the sun's direction (2, fixed over the few
-   seconds of the observations). The cameras stay where the first fit put them.
+   panel (world frame) is predicted from the lens pose and the sun: by default where the
+   chief ray meets the panel (it goes straight through the lens: Eq 14 read backwards);
+   the lens planner passes the lens model's centre of the spot's outermost contour
+   (``spot.SpotModel``, what the detector measures; Eq 10). Fitted: the lens centre across
+   its axis in the holder (2) and the sun's direction at a reference time (2; each spot's
+   sun moved from it by Eq 18). The cameras stay where the first fit put them.
 
 Each term has a prior: the rig file's value, within ``prior_sigma`` (a 3D-printed build's
 spread), so the fit is a maximum a posteriori estimate that stays well posed whatever the
