@@ -1154,9 +1154,7 @@ class LensPlannerNode(Node):
         scale = heating_distance / model_best if model_best > 0 else 1.0
         self.lens = type(self.lens)(**{**self.lens.__dict__,
                                        'focal_length': self.lens.focal_length * scale})
-        self.nominal_rig = self.rig.parameters      # the rig file's: a calibration's priors
-        self.rig_calibrated = False                 # a rig calibration applied (issue 28)
-        self.spot_model = SpotModel(self.lens)
+        self.spot_model = SpotModel(self.lens)      # the rig calibration's, of this lens
         self.targeting = FocusTargeting(self.rig, self.lens, rays=self.focus_rays)
         self.heating_distance = heating_distance
 
