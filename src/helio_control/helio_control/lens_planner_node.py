@@ -247,7 +247,6 @@ class LensPlannerNode(Node):
             'calibration_dir for this rig description, publish and use them.')
 
         self.nominal_rig = self.rig.parameters      # the rig file's: a calibration's priors
-        self.rig_calibrated = False                 # a rig calibration applied (issue 28)
         self.spot_model = SpotModel(self.lens)
         self.targeting = FocusTargeting(self.rig, self.lens, rays=self.focus_rays)
         self.world_calibrated = False      # T_robot_world measured: no marker needed
@@ -343,7 +342,6 @@ class LensPlannerNode(Node):
     def _publish_rig(self, flat, identity):
         """Use a rig calibration's values and publish them on calibration/rig (latched)."""
         self.rig.apply_calibration(flat, identity)
-        self.rig_calibrated = True
         self.world_calibrated = True
         self.rig_publisher.publish(String(data=yaml.safe_dump(
             {**flat, 'calibration_id': identity}, sort_keys=True)))
@@ -800,9 +798,8 @@ class LensPlannerNode(Node):
             if len(joints) < 3:
                 raise ValueError(f'{len(joints)} marker views: at least 3 are needed')
             joints, world_rgb = rig_calibration.mean_views(joints, world_rgb, indices)
-            chain = await in_thread(self, rig_calibration.fit_camera_chain, self.nominal_rig,
-                                    joints, world_rgb, rig_calibration.CAMERA_CHAIN, 3e-4,
-                                    math.radians(0.15), 6.0, world)
+            chain = await in_thread(self, lambda: rig_calibration.fit_camera_chain(
+                self.nominal_rig, joints, world_rgb, world_guess=world))
         except ValueError as error:
             raise GoalFailed(f'rig calibration failed: {error}') from None
         result.views_used = chain.used

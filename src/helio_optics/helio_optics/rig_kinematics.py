@@ -458,7 +458,7 @@ class Rig:
         Use a rig calibration's flat values ({name: value}, the names of config/rig.yaml).
 
         Unknown names raise ValueError; the names left out keep their present values.
-        `calibration_id` names the calibration (``calibration_id`` tells which one is used).
+        `calibration_id` names it: the attribute ``calibration_id`` says which one is in use.
         """
         flat = self.parameters.to_parameters()
         unknown = sorted(set(values) - set(flat))
