@@ -59,7 +59,7 @@ from helio_optics.node_kit.conversions import array_to_point, camera_from_info
 from helio_optics.node_kit.conversions import matrix_to_pose, point_to_array, pose_to_matrix
 from helio_optics.node_kit.conversions import stamp_from_seconds, stamp_to_seconds
 from helio_optics.node_kit.deployment import declare_lens, declare_rig, declare_site
-from helio_optics.node_kit.deployment import follow_world_calibration
+from helio_optics.node_kit.deployment import follow_world_calibration, RIG_CALIBRATION_TOPIC
 from helio_optics.node_kit.emergency_stop import EmergencyStopListener
 from helio_optics.node_kit.joint_states import JointStateBuffer
 from helio_optics.node_kit.parameters import declare
@@ -272,7 +272,7 @@ class LensPlannerNode(Node):
                                                      LATCHED)
         self.focus_publisher = self.create_publisher(FocalCalibration, 'calibration/focus',
                                                      LATCHED)
-        self.rig_publisher = self.create_publisher(String, 'calibration/rig', LATCHED)
+        self.rig_publisher = self.create_publisher(String, RIG_CALIBRATION_TOPIC, LATCHED)
         lease_topic = declare(
             self, 'lease_topic', 'painter/heartbeat',
             'std_msgs/Header heartbeat of the client a focus at the heating distance is held '
