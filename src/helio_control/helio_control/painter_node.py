@@ -33,7 +33,8 @@ Beyond the paper:
   silent or faulted), the arm alone lifts the lens straight up by ``arm_escape_lift``, a
   ``move_arm`` goal (``escape_lift``); a retreat goal not accepted within
   ``retreat_accept_timeout`` of wall time, as a killed lens planner's never is, goes to the
-  wrist at once, and any goal not accepted within ``goal_accept_timeout`` fails the painting).
+  wrist at once, and any goal not accepted within ``goal_accept_timeout`` fails the painting;
+  a goal accepted after the painter gave up on it is cancelled).
   A stale stream then gets ``thermal_back_timeout`` to come back (the dot is heated again from
   the start, and the result counts it); everything else ends the goal saying why. A window-rule
   frame without a camera pose is fresh data without a window reading: heat on while the image's
@@ -161,6 +162,13 @@ def unfinished_run(runs_dir, key):
     return None
 
 
+def _cancel_if_accepted(sent):
+    """Cancel the goal of a send future that completed after the painter gave up on it."""
+    handle = sent.result() if sent.done() and sent.exception() is None else None
+    if handle is not None and handle.accepted:
+        handle.cancel_goal_async()
+
+
 class PainterNode(Node):
     """See the module docstring."""
 
@@ -254,9 +262,10 @@ class PainterNode(Node):
             'which then retreats: a killed server stays discovered for seconds and never '
             'answers [s].', 0.1, 600.0)
         self.retreat_accept_timeout = declare(
-            self, 'retreat_accept_timeout', 0.5,
+            self, 'retreat_accept_timeout', 0.25,
             'A retreat goal not accepted within this (wall clock) goes to the next way of '
-            'taking the focus off the wood: the lens planner, then the wrist [s].', 0.05, 10.0)
+            'taking the focus off the wood: the lens planner, then the wrist; it counts '
+            'against the 0.5 s in which the focus must be off [s].', 0.05, 10.0)
         self.wrist_turn = declare(self, 'wrist_escape_pitch', 0.6,
                                   'If the arm cannot retreat, turn the lens pitch by this to '
                                   'put the focus off the wood [rad].', 0.05, 1.5)
@@ -460,6 +469,9 @@ class PainterNode(Node):
         limit = self.retreat_accept_timeout if urgent else self.goal_accept_timeout
         sent = client.send_goal_async(goal)
         if not await within(self, sent, limit, wall=True):
+            # accepted after all, late (a loaded machine): cancelled, so that it does not
+            # move the lens against the next way the painter takes
+            sent.add_done_callback(_cancel_if_accepted)
             raise PaintFailed(f'{name} did not accept the goal within {limit:g} s (is its node '
                               'running?)')
         handle = sent.result()
