@@ -209,6 +209,10 @@ class MarkerConfig:
     # whole-frame search that fails tries every scale (about 30 ms a frame here) [s] (0: every
     # frame)
     miss_retry_period: float = 1.0
+    # a marker that the kinematic camera pose puts wholly outside the image, grown by this many
+    # of its sides all round (the pose's error before a rig calibration), is not searched for:
+    # a failed whole-frame search is most of a painting frame's cost (negative: always search)
+    out_of_view_margin: float = 1.0
     refine_edges: bool = True        # corners from lines fitted to the marker's outer edges
     # the fine edge fit is repeated until its corners move less than 0.001 px, at most this
     # often: the result then does not depend on where the search started (ROI or frame)
@@ -709,7 +713,8 @@ class MarkerPoseTracker:
     previous_joints: np.ndarray = None
     last_miss: tuple = None           # (joints, stamp, reason) of a marker not found, still
     counts: dict = field(default_factory=lambda: {'cache': 0, 'roi': 0, 'full': 0,
-                                                  'failed': 0, 'miss_cache': 0})
+                                                  'failed': 0, 'miss_cache': 0,
+                                                  'out_of_view': 0})
 
     def update(self, gray, camera, stamp, joints=None):
         """Return a MarkerResult for this image; `joints` the current joint positions."""

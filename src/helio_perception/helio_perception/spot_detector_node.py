@@ -95,6 +95,11 @@ class SpotDetectorNode(Node):
                                       'A marker not found while the joints stay still is '
                                       'searched for again only this often (0: every frame) '
                                       '[s].', 0.0, 3600.0),
+            out_of_view_margin=declare(self, 'marker.out_of_view_margin', 1.0,
+                                       'The marker is not searched for where the kinematic '
+                                       'camera pose puts it wholly outside the image, grown '
+                                       'by this many of its sides all round (negative: '
+                                       'always search) [-].', -1.0, 100.0),
             refine_edges=declare(self, 'marker.refine_edges', True,
                                  'Take the corners from lines fitted to the outer edges.'),
             detect_max_width=declare(self, 'marker.detect_max_width', 640,

@@ -9,7 +9,7 @@ node turns into a helio_msgs/SpotObservation.
 
 from dataclasses import dataclass, field
 
-from helio_optics.geometry import invert_transform
+from helio_optics.geometry import invert_transform, transform_points
 from helio_perception.ground_plane import (
     GroundMapping, MarkerConfig, MarkerDetector, MarkerPoseTracker)
 from helio_perception.spot_detection import (
@@ -41,6 +41,32 @@ def optics_from_world(T_robot_lens, T_lens_optics, T_robot_world):
     return invert_transform(T_robot_lens @ T_lens_optics) @ T_robot_world
 
 
+def marker_out_of_view(camera, T_world_camera, side, margin):
+    """
+    Tell whether the marker, grown by `margin` of its sides all round, is wholly out of view.
+
+    The marker is a square of `side` [m] centred on the world origin (z = 0), the camera at
+    `T_world_camera`; a negative margin: never out of view. Conservative: the grown square's
+    corners, projected through the pinhole without distortion, must all lie beyond one and
+    the same image edge; a corner behind or nearly in the camera's plane keeps the marker
+    "maybe in view".
+    """
+    if margin < 0.0:
+        return False
+    half = side * (0.5 + margin)
+    corners = np.array([[-half, -half, 0.0], [half, -half, 0.0], [half, half, 0.0],
+                        [-half, half, 0.0]])
+    in_camera = transform_points(invert_transform(np.asarray(T_world_camera, dtype=float)),
+                                 corners)
+    if np.any(in_camera[:, 2] <= 1e-3):
+        return False
+    pixels = in_camera[:, :2] / in_camera[:, 2:3] @ camera.matrix[:2, :2].T \
+        + camera.matrix[:2, 2]
+    u, v = pixels[:, 0], pixels[:, 1]
+    return bool(np.all(u < -0.5) or np.all(u > camera.width - 0.5)
+                or np.all(v < -0.5) or np.all(v > camera.height - 0.5))
+
+
 class SpotObserver:
     """Marker pose tracking plus spot detection, with the ground mapping cached per pose."""
 
@@ -65,12 +91,20 @@ class SpotObserver:
         `stamp` [s] of the image; `joints` the joint positions when it was taken (None if
         unknown: the marker is then searched near its last corners every frame).
         `T_world_camera_kinematic`, when given, is the camera pose from the joints' forward
-        kinematics and the robot-world calibration: used when the marker is not in view.
+        kinematics and the robot-world calibration: used when the marker is not in view, and
+        the marker is not searched for where that pose puts it wholly out of view
+        (`marker_out_of_view`, ``MarkerConfig.out_of_view_margin``).
         """
         gray = to_gray(image, channel_order)
         if gray.shape != (camera.height, camera.width):
             raise ValueError(f'image is {gray.shape[1]}x{gray.shape[0]} but the camera info '
                              f'says {camera.width}x{camera.height}')
+        if T_world_camera_kinematic is not None and marker_out_of_view(
+                camera, T_world_camera_kinematic, self.marker_config.side,
+                self.marker_config.out_of_view_margin):
+            self.tracker.counts['out_of_view'] += 1
+            return self._observe_with(gray, camera, stamp, T_world_camera_kinematic,
+                                      T_optics_world, 'out_of_view')
         marker = self.tracker.update(gray, camera, stamp, joints)
         if marker.pose is None:
             if T_world_camera_kinematic is None:

@@ -199,7 +199,8 @@ def test_pose_cache_reuses_while_joints_are_still_and_redetects_when_they_move(s
     plain = to_gray(scene.render(moved_pose, with_marker=False, rng=rng).image)
     lost = tracker.update(plain, scene.camera, 1.3, joints + 0.02)
     assert lost.pose is None and 'not found' in lost.reason
-    assert tracker.counts == {'cache': 1, 'roi': 4, 'full': 1, 'failed': 1, 'miss_cache': 0}
+    assert tracker.counts == {'cache': 1, 'roi': 4, 'full': 1, 'failed': 1, 'miss_cache': 0,
+                              'out_of_view': 0}
 
 
 def test_a_marker_out_of_view_is_searched_again_only_when_the_joints_move_or_a_period_passed(

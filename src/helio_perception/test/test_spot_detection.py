@@ -1,10 +1,12 @@
 """Light-spot detection on synthetic frames with known truth (issue 4 "Done when")."""
 
 import cv2
-from helio_optics.geometry import homogeneous, PinholeCamera, rotation_z, transform_points
+from helio_optics.geometry import (
+    homogeneous, invert_transform, PinholeCamera, rotation_z, transform_points)
 from helio_optics.ground_render import GroundEllipse, GroundTexture
+from helio_perception.ground_plane import MarkerConfig
 from helio_perception.spot_detection import SpotConfig, SpotDetector, to_gray
-from helio_perception.spot_observer import optics_from_world, SpotObserver
+from helio_perception.spot_observer import marker_out_of_view, optics_from_world, SpotObserver
 from helio_perception.synthetic_scene import SyntheticScene
 import numpy as np
 import pytest
@@ -185,3 +187,56 @@ def test_a_distorted_camera_measures_the_spot_as_well():
         assert result.valid, result.reason
         assert np.linalg.norm(result.spot.center[:2] - spot.center) < 2e-4
         assert result.spot.area == pytest.approx(spot.area, rel=0.03)
+
+
+def test_the_marker_is_predicted_out_of_view_only_where_no_part_of_it_could_be_seen(scene):
+    """`marker_out_of_view` against every point of the grown marker projected, pose by pose."""
+    rng = np.random.default_rng(51)
+    side, margin = 0.04, 1.0
+    half = side * (0.5 + margin)
+    grid = np.linspace(-half, half, 41)
+    grown = np.array([[x, y, 0.0] for x in grid for y in grid])
+    size = np.array([scene.camera.width, scene.camera.height])
+    said_out = 0
+    for _ in range(300):
+        # looking down from 8-25 cm at a point up to 30 cm from the marker, tilted and rolled
+        target = np.append(rng.uniform(-0.3, 0.3, 2), 0.0)
+        T_world_camera = scene.tilted_pose(rng, rng.uniform(0.08, 0.25),
+                                           rng.uniform(0.0, np.radians(50)), target)
+        out = marker_out_of_view(scene.camera, T_world_camera, side, margin)
+        in_camera = transform_points(invert_transform(T_world_camera), grown)
+        pixels = scene.camera.project(in_camera[in_camera[:, 2] > 0])
+        seen = np.any(np.all((pixels >= -0.5) & (pixels <= size - 0.5), axis=1))
+        assert not (out and seen), 'a marker in view was predicted out of view'
+        said_out += out
+    # most of these views do not show the marker, and most of those are said so
+    assert said_out > 100, said_out
+    assert not marker_out_of_view(scene.camera, T_world_camera, side, -1.0)
+
+
+def test_a_marker_predicted_out_of_view_is_not_searched_and_the_spot_is_still_measured(scene):
+    rng = np.random.default_rng(52)
+    # the camera 15 cm above a spot 20 cm from the marker: the marker far outside the image
+    spot = GroundEllipse(center=(0.2, 0.12), semi_axes=(0.004, 0.003), angle=0.3, value=0.8)
+    T_world_camera = scene.tilted_pose(rng, 0.15, np.radians(20), (0.2, 0.12, 0.0))
+    frame = scene.render(T_world_camera, [spot], rng=rng)
+    observer = SpotObserver()
+    observation = observer.observe(frame.image, scene.camera, 0.0, joints=np.zeros(5),
+                                   T_world_camera_kinematic=T_world_camera)
+    assert observation.valid, observation.reason
+    assert observation.pose_source == 'kinematics'
+    assert observation.marker_search == 'out_of_view'
+    assert observer.tracker.counts['out_of_view'] == 1
+    assert observer.tracker.counts['full'] + observer.tracker.counts['failed'] == 0
+    assert np.linalg.norm(observation.spot.center[:2] - spot.center) < 3e-4
+    # with the prediction off, the whole frame is searched (and the marker not found)
+    searching = SpotObserver(MarkerConfig(out_of_view_margin=-1.0))
+    observation = searching.observe(frame.image, scene.camera, 0.0, joints=np.zeros(5),
+                                    T_world_camera_kinematic=T_world_camera)
+    assert observation.valid and searching.tracker.counts['failed'] == 1
+    # a pose that shows the marker is searched as before: the marker's own pose is taken
+    T_world_camera, (spot,) = scene.random_view(rng, spot_options={'value': 0.8})
+    frame = scene.render(T_world_camera, [spot], rng=rng)
+    observation = observer.observe(frame.image, scene.camera, 1.0, joints=np.ones(5),
+                                   T_world_camera_kinematic=T_world_camera)
+    assert observation.pose_source == 'marker' and observation.marker_search == 'full'
