@@ -35,7 +35,10 @@ Two methods:
 When the estimate is trusted (``TrustSettings``):
 - Screening: an observation that no sun can have cast is left out with its reason (centre
   not finite, off the plane, above the lens, lens not above the plane, chief ray grazing the
-  plane: a centre metres away or at 1e300).
+  plane: a centre metres away or at 1e300), and one the model cannot be trusted with: a lens
+  axis farther than ``max_chief_ray_tilt`` from the sweep's chief ray (the median direction
+  from the lens centres to the spot centres, nearly the sun's ray; off by default; the node
+  sets the limit within which the spot's noise was measured, ``centre_noise``).
 - Outliers: the observation (LM: whitened centre residual; interaction matrix: image
   answer against the mean of the others) beyond chi2_2(1 - outlier_alpha) is left out, one
   at a time, worst first, then the fit is repeated (``TrustSettings.worst_outlier``); the
@@ -160,6 +163,11 @@ class TrustSettings:
     ambiguity_search: bool = True    # look for other minima at all
     plane_tolerance: float = 2e-3    # a centre farther off the plane is left out [m]
     min_chief_ray_elevation: float = math.radians(3.0)  # chief rays flatter: left out [rad]
+    # An observation whose lens axis lies farther off the observations' median chief ray
+    # (lens centre to spot: nearly the sun) is left out: there the rim model's centre errs by
+    # far more than its noise, alike over a sweep, so no chi-square sees it
+    # (centre_noise.CentreNoise.max_tilt, the node's 15 deg). pi: off.
+    max_chief_ray_tilt: float = math.pi  # [rad]
 
     def __post_init__(self):
         """Reject values outside their ranges, naming them."""
@@ -175,6 +183,9 @@ class TrustSettings:
         if not 0.0 <= self.min_chief_ray_elevation < 0.5 * math.pi:
             raise ValueError('min_chief_ray_elevation must be in [0, pi/2) rad, got '
                              f'{self.min_chief_ray_elevation}')
+        if not 0.0 < self.max_chief_ray_tilt <= math.pi:
+            raise ValueError('max_chief_ray_tilt must be in (0, pi] rad, got '
+                             f'{self.max_chief_ray_tilt}')
 
     def fit_threshold(self, dof):
         """Largest chi-square a fit with `dof` degrees of freedom may have (at least 1 dof)."""
@@ -435,14 +446,26 @@ class SunEstimator:
 
         Returns (kept indices, [(index, reason)]): a non-finite centre, a lens not above the
         plane, a centre above the lens or off the plane, a chief ray flatter than
-        ``min_chief_ray_elevation`` (a centre metres away) are left out.
+        ``min_chief_ray_elevation`` (a centre metres away), a lens axis farther than
+        ``max_chief_ray_tilt`` from the observations' median chief ray (where the model is
+        not trusted) are left out.
         """
         trust = trust or self.trust
+        problems = [_screening_problem(o, trust) for o in observations]
+        plausible = [o for o, problem in zip(observations, problems) if not problem]
+        if plausible and trust.max_chief_ray_tilt < math.pi:
+            # the sweep's chief ray: the median of its lens-to-spot directions, nearly the
+            # sun's ray (a thin lens does not deviate the ray through its centre); judged
+            # against it, not against each spot's own, a spot cannot move itself (or a
+            # minority of spots move themselves) into or out of the model's reach
+            chief = unit(np.median([unit(o.centre - o.T_robot_lens[:3, 3]) for o in plausible],
+                                   axis=0))
+            problems = [problem or _reach_problem(o, chief, trust)
+                        for o, problem in zip(observations, problems)]
         kept, outliers = [], []
-        for index, o in enumerate(observations):
-            reason = _screening_problem(o, trust)
-            if reason:
-                outliers.append((index, reason))
+        for index, problem in enumerate(problems):
+            if problem:
+                outliers.append((index, problem))
             else:
                 kept.append(index)
         return kept, outliers
@@ -454,8 +477,11 @@ class SunEstimator:
         trust = trust or self.trust
         kept, outliers = self.screen(observations, trust)
         if not kept:
+            reasons = list(dict.fromkeys(reason for _, reason in outliers))
             return trust, None, outliers, self._failure(
-                method, 0, 'no observation a sun can have cast', outliers)
+                method, 0, "no observation a sun can have cast within the model's reach: "
+                + reasons[0] + (f' (and {len(reasons) - 1} other reasons)' if len(reasons) > 1
+                                else ''), outliers)
         return trust, _Data(observations, kept), outliers, None
 
     # -- the paper's method (Eqs 11-12) ------------------------------------------------------
@@ -1037,6 +1063,19 @@ def _screening_problem(observation, trust):
                 f'only {math.degrees(elevation):.3g} deg above the plane (limit '
                 f'{math.degrees(trust.min_chief_ray_elevation):.3g} deg)')
     return ''
+
+
+def _reach_problem(observation, chief, trust):
+    """Why the model is not trusted with this observation, sun along `chief` ('' if it is)."""
+    axis = observation.T_robot_lens[:3, 2]
+    tilt = math.acos(max(-1.0, min(1.0, float(-(chief @ axis)))))
+    if tilt <= trust.max_chief_ray_tilt:
+        return ''
+    return (f"the sweep's chief ray (the median lens-to-spot direction, nearly the sun's ray) "
+            f'lies {math.degrees(tilt):.3g} deg off its lens axis (limit '
+            f'{math.degrees(trust.max_chief_ray_tilt):.3g} deg): so far off its axis the rim '
+            'model misplaces the spot by up to millimetres, alike over the sweep; face the '
+            'lens to the sun')
 
 
 def _plane_basis(normals):

@@ -10,7 +10,15 @@ with the lens pose from those joints and the pysolar sun position at its stamp. 
 (helio_msgs/EstimateSun) moves every observation to one reference time (the middle of the
 observations used) by Eq 18, runs ``SunEstimator`` and answers with the estimate at that
 time; ``success`` only when it is trustworthy (a minimum that fits within the noise, not
-ambiguous), else the reason. A trustworthy estimate is published on ``sun/estimate``
+ambiguous), else the reason. The frames of one still lens pose (a hold) are merged into one
+observation before the fit (``centre_noise.merge_holds``): their errors against the model
+are nearly all shared, so they are not independent evidence; the hold's sigma grows as the
+chief ray (lens centre to spot) comes in flatter, and spots whose lens axis lies more than
+``max_chief_ray_tilt_deg`` off the sweep's median chief ray (nearly the sun) are left out
+(``centre_noise.CentreNoise``, measured on the simulated world's frames:
+docs/measurements/2026-11-27-sweep-honesty.md).
+The answer still counts and names frames (``observations``, stamps, outliers); the fit's
+degrees of freedom count holds. A trustworthy estimate is published on ``sun/estimate``
 (helio_msgs/SunEstimate, reliable, transient local) moved to the time of publication, and a
 timer republishes it moved along with the sun by Eq 18. Names are relative (the node runs
 under a namespace with its rig). Parameters: see ``config/sun_estimator.yaml`` (all declared
@@ -27,6 +35,7 @@ import traceback
 
 from helio_msgs.msg import SpotObservation, SunEstimate
 from helio_msgs.srv import EstimateSun
+from helio_optics.centre_noise import CentreNoise, frame_verdicts, merge_holds
 from helio_optics.ephemeris import angle_offsets, corrected_angles, sun_position
 from helio_optics.geometry import direction_from_angles, invert_transform, transform_points
 from helio_optics.node_kit.conversions import point_to_array, stamp_from_seconds
@@ -122,8 +131,23 @@ class SunEstimatorNode(Node):
         declare(self, 'contour_fraction', 1.0,
                 'radius of the modelled contour ring over the aperture radius (1: rim) [-]',
                 0.05, 1.0)
-        declare(self, 'centre_sigma', 0.5e-3,
-                'standard deviation of a spot centre on the ground [m]', 1e-6, 0.05, dynamic=True)
+        # The noise of a hold's spot centre (centre_noise.CentreNoise; measured on the
+        # simulated world's rendered frames: docs/measurements/2026-11-27-sweep-honesty.md)
+        noise = CentreNoise()
+        declare(self, 'centre_sigma', noise.floor,
+                "standard deviation of a hold's spot centre on the ground, per axis, under a "
+                'sun straight above: the floor of the noise model (the frames of a still lens '
+                'pose merged) [m]', 1e-6, 0.05, dynamic=True)
+        declare(self, 'centre_sigma_per_cot', noise.per_cot,
+                "the centre's standard deviation grows by this times the cotangent of the "
+                "chief ray's (lens centre to spot) elevation above the ground [m]", 0.0, 0.05,
+                dynamic=True)
+        declare(self, 'frame_sigma', noise.frame,
+                "one frame's own scatter about its hold's centre, per axis [m]", 0.0, 0.05,
+                dynamic=True)
+        declare(self, 'hold_frame_tolerance', noise.frame_tolerance,
+                "a frame farther than this from the median of its hold's frames is left out "
+                '[m]', 1e-6, 0.05, dynamic=True)
         declare(self, 'max_observations', 60, 'spot observations kept for an estimate [-]',
                 1, 10000, dynamic=True)
         declare(self, 'max_observation_age', 300.0,
@@ -191,9 +215,21 @@ class SunEstimatorNode(Node):
         declare(self, 'min_chief_ray_elevation_deg', 3.0,
                 'a spot whose chief ray (lens centre to spot) rises less above the ground is '
                 'left out (a centre metres away) [deg]', 0.0, 80.0, dynamic=True)
+        declare(self, 'max_chief_ray_tilt_deg', round(math.degrees(noise.max_tilt), 6),
+                "a spot whose lens axis lies farther off the observations' median chief ray "
+                "(lens centre to spot: nearly the sun) is left out: there the lens model's "
+                'centre errs by far more than centre_sigma says, alike over a sweep (measured '
+                'on the simulated world) [deg]', 1.0, 180.0,
+                dynamic=True)
 
     def _parameter(self, name):
         return self.get_parameter(name).value
+
+    def _noise(self):
+        p = self._parameter
+        return CentreNoise(floor=p('centre_sigma'), per_cot=p('centre_sigma_per_cot'),
+                           frame=p('frame_sigma'), frame_tolerance=p('hold_frame_tolerance'),
+                           max_tilt=math.radians(p('max_chief_ray_tilt_deg')))
 
     def _trust(self):
         p = self._parameter
@@ -203,7 +239,8 @@ class SunEstimatorNode(Node):
             ambiguity_chi2=p('ambiguity_chi2'),
             ambiguity_separation=math.radians(p('ambiguity_separation_deg')),
             plane_tolerance=p('plane_tolerance'),
-            min_chief_ray_elevation=math.radians(p('min_chief_ray_elevation_deg')))
+            min_chief_ray_elevation=math.radians(p('min_chief_ray_elevation_deg')),
+            max_chief_ray_tilt=math.radians(p('max_chief_ray_tilt_deg')))
 
     # -- inputs ------------------------------------------------------------------------------
     def _on_joint_state(self, message):
@@ -310,12 +347,11 @@ class SunEstimatorNode(Node):
                                 + self._skipped_note())
             return response
         try:
-            trust = self._trust()
+            trust, noise = self._trust(), self._noise()
         except ValueError as error:
             response.success = False
             response.message = f'trust parameters refused: {error}'
             return response
-        sigma = self._parameter('centre_sigma')
         response.rig_calibration = self.rig.calibration_id
         options = {'max_iterations': self._parameter('max_iterations')}
         if method == 'interaction_matrix':
@@ -324,7 +360,7 @@ class SunEstimatorNode(Node):
         # A request that asks what the last one asked (the same observations and settings)
         # gets its answer without a new fit; one that needs a fit while fits have taken more
         # than their budget of wall time is refused as busy (issue 35: a flood of requests).
-        key = (method, tuple(b.seconds for b in buffered), repr(trust), sigma,
+        key = (method, tuple(b.seconds for b in buffered), repr(trust), repr(noise),
                tuple(sorted(options.items())), self.rig.parameters)   # a calibration refits
         if self._last_answer is not None and self._last_answer[0] == key:
             _, response.success, response.message, estimate = self._last_answer
@@ -338,7 +374,7 @@ class SunEstimatorNode(Node):
             return response
         began = time.monotonic()
         try:
-            self._fit(method, buffered, trust, sigma, options, response)
+            self._fit(method, buffered, trust, noise, options, response)
         finally:
             ended = time.monotonic()
             self._fits.append((ended, ended - began))
@@ -358,8 +394,13 @@ class SunEstimatorNode(Node):
         return (f'busy: estimates took {spent:.1f} s of the last {window:g} s (busy_budget '
                 f'{budget:g}); ask again in a few seconds')
 
-    def _fit(self, method, buffered, trust, sigma, options, response):
-        """Fit the sun to the buffered observations; fill in `response` (Eqs 10-12, 18)."""
+    def _fit(self, method, buffered, trust, noise, options, response):
+        """
+        Fit the sun to the buffered observations; fill in `response` (Eqs 10-12, 18).
+
+        The frames of each hold are merged first (``merge_holds``); the answer tells per
+        frame what became of it (``frame_verdicts``).
+        """
         # Eq 18: every observation moved to one reference time, the middle of the sweep.
         seconds = [b.seconds for b in buffered]
         reference = 0.5 * (min(seconds) + max(seconds))
@@ -370,17 +411,19 @@ class SunEstimatorNode(Node):
         try:
             observations = [Observation(
                 transform_points(T_world, b.centre), self.rig.forward(b.joints).T_robot_lens,
-                T_world[:3, 3], T_world[:3, 2], sigma,
+                T_world[:3, 3], T_world[:3, 2], noise.sigma(),
                 angle_offsets(anchor, b.sun) if corrected else (0.0, 0.0)) for b in buffered]
-            result = self.estimator.estimate(observations, method=method, trust=trust,
-                                             **options)
+            holds = merge_holds(observations, noise)    # each sigma from its chief ray
+            result = self.estimator.estimate([h.observation for h in holds], method=method,
+                                             trust=trust, **options)
         except ValueError as error:
-            self.get_logger().error(f'estimation failed on {len(observations)} observations:\n'
+            self.get_logger().error(f'estimation failed on {len(buffered)} observations:\n'
                                     f'{traceback.format_exc()}')
             response.success = False
             response.message = f'estimation failed: {error}'
             return response
-        message = self._message(result, buffered, reference_stamp, anchor, corrected)
+        frames = frame_verdicts(holds, result, noise)
+        message = self._message(result, frames, buffered, reference_stamp, anchor, corrected)
         response.estimate = message
         response.success = result.trustworthy
         when = stamp_to_datetime(stamp_to_nanoseconds(reference_stamp)).isoformat()
@@ -388,9 +431,9 @@ class SunEstimatorNode(Node):
                      f'{max(seconds) - min(seconds):.1f} s'
                      + (', each moved there by Eq 18)' if corrected else
                         "; NOT corrected for the sun's motion: no ephemeris)"))
-        outliers = (f'; {len(result.outliers)} left out: ' + '; '.join(
+        outliers = (f'; {len(frames.left_out)} left out: ' + '; '.join(
             f'observation at {buffered[i].seconds:.3f} s: {reason}'
-            for i, reason in result.outliers)) if result.outliers else ''
+            for i, reason in frames.left_out)) if frames.left_out else ''
         if not result.trustworthy:
             response.message = (f'{method}: estimate not trustworthy {time_note}: '
                                 f'{result.reason or "not converged"}{outliers}'
@@ -405,9 +448,10 @@ class SunEstimatorNode(Node):
         response.message = (
             f'{method}: phi0 {math.degrees(result.phi0):.3f} deg, theta0 '
             f'{math.degrees(result.theta0):.3f} deg (sigma {spread[0]:.3f}, {spread[1]:.3f} deg) '
-            f'{time_note} from {result.observations} observations in {result.iterations} '
-            f'iterations; fit chi-square {result.chi2:.3g} <= {result.chi2_threshold:.3g} '
-            f'({result.dof} degrees of freedom){outliers}{self._skipped_note()}')
+            f'{time_note} from {len(frames.used)} observations ({result.observations} still '
+            f'poses) in {result.iterations} iterations; fit chi-square {result.chi2:.3g} <= '
+            f'{result.chi2_threshold:.3g} ({result.dof} degrees of freedom){outliers}'
+            f'{self._skipped_note()}')
         self.get_logger().info(response.message)
         return response
 
@@ -418,8 +462,14 @@ class SunEstimatorNode(Node):
         return '; spots left out since the start: ' + ', '.join(
             f'{count} {why}' for why, count in sorted(self._skipped.items()))
 
-    def _message(self, result, buffered, reference_stamp, anchor, corrected):
-        """Build the SunEstimate at the reference time (header.stamp = anchor_stamp)."""
+    def _message(self, result, frames, buffered, reference_stamp, anchor, corrected):
+        """
+        Build the SunEstimate at the reference time (header.stamp = anchor_stamp).
+
+        Observations, their stamps, deviations and outliers are frames (`frames`:
+        ``FrameVerdicts``); a hold's frames share its deviation; the fit's degrees of freedom
+        count holds.
+        """
         message = SunEstimate()
         message.header.stamp = reference_stamp
         message.header.frame_id = 'robot'
@@ -433,7 +483,7 @@ class SunEstimatorNode(Node):
         message.residual = float(result.residual) if math.isfinite(result.residual) else 0.0
         message.converged = bool(result.converged)
         message.reason = result.reason
-        message.observations = int(result.observations)
+        message.observations = len(frames.used)
         message.anchor_stamp = reference_stamp
         if anchor is not None:
             message.anchor_elevation = message.elevation = anchor.elevation
@@ -442,14 +492,14 @@ class SunEstimatorNode(Node):
         message.fit_dof = int(result.dof)
         message.fit_threshold = float(result.chi2_threshold) \
             if math.isfinite(result.chi2_threshold) else 0.0
-        message.observation_deviation = [float(v) for v in result.deviations]
-        message.observation_stamps = [buffered[i].stamp for i in result.inliers]
-        used = [buffered[i].seconds for i in result.inliers]
+        message.observation_deviation = [float(v) for v in frames.deviations]
+        message.observation_stamps = [buffered[i].stamp for i in frames.used]
+        used = [buffered[i].seconds for i in frames.used]
         message.observation_span = float(max(used) - min(used)) if used else 0.0
         message.ephemeris_corrected = bool(corrected)
-        message.outliers = len(result.outliers)
-        message.outlier_stamps = [buffered[i].stamp for i, _ in result.outliers]
-        message.outlier_reasons = [reason for _, reason in result.outliers]
+        message.outliers = len(frames.left_out)
+        message.outlier_stamps = [buffered[i].stamp for i, _ in frames.left_out]
+        message.outlier_reasons = [reason for _, reason in frames.left_out]
         message.ambiguous = bool(result.ambiguous)
         if result.alternatives:
             best = result.alternatives[0]

@@ -45,7 +45,10 @@ RANGES = {
     'plane_tolerance': (1e-6, 1.0), 'min_chief_ray_elevation_deg': (0.0, 80.0),
     'still_margin': (0.0, 10.0), 'still_hold': (0.0, 10.0), 'still_epsilon': (0.0, 0.1),
     'still_wait': (0.0, 60.0), 'request_queue_depth': (1, 10000),
-    'busy_budget': (0.05, 1.0), 'busy_window': (0.1, 3600.0)}
+    'busy_budget': (0.05, 1.0), 'busy_window': (0.1, 3600.0),
+    # the noise of a hold's centre (issue 35, centre_noise)
+    'centre_sigma_per_cot': (0.0, 0.05), 'frame_sigma': (0.0, 0.05),
+    'hold_frame_tolerance': (1e-6, 0.05), 'max_chief_ray_tilt_deg': (1.0, 180.0)}
 # Read each time an estimate is made: may change while the node runs. Every other parameter
 # is read at start-up and declared read-only.
 DYNAMIC = {'method', 'centre_sigma', 'max_observations', 'max_observation_age',
@@ -53,7 +56,8 @@ DYNAMIC = {'method', 'centre_sigma', 'max_observations', 'max_observation_age',
            'fit_alpha', 'outlier_alpha', 'max_outlier_fraction', 'step_tolerance',
            'ambiguity_chi2', 'ambiguity_separation_deg', 'plane_tolerance',
            'min_chief_ray_elevation_deg', 'still_only', 'still_margin', 'still_hold',
-           'still_epsilon', 'still_wait', 'busy_budget', 'busy_window'}
+           'still_epsilon', 'still_wait', 'busy_budget', 'busy_window', 'centre_sigma_per_cot',
+           'frame_sigma', 'hold_frame_tolerance', 'max_chief_ray_tilt_deg'}
 
 
 @pytest.fixture
@@ -128,8 +132,13 @@ def test_a_start_up_value_outside_its_range_stops_the_node_with_the_reason():
             SunEstimatorNode(**in_process.node_options(rim_points=4097))
 
 
-def sweep_joints(rig, sun=SUN, offsets_deg=(-10.0, -5.0, 0.0, 5.0, 10.0), tilt_deg=14.0):
-    """Joints of a lens yaw sweep viewing a clear spot near the canvas centre."""
+def sweep_joints(rig, sun=SUN, offsets_deg=(-10.0, -5.0, 0.0, 5.0, 10.0), tilt_deg=10.0):
+    """
+    Joints of a lens yaw sweep viewing a clear spot near the canvas centre.
+
+    The lens axis is `tilt_deg` more level than the sun's ray: its chief rays stay within the
+    node's max_chief_ray_tilt_deg (15), with room for a sun that moves during the sweep.
+    """
     target = transform_points(rig.parameters.T_robot_world, [0.1, 0.1, 0.0])
     centre = target - 0.06 * sun
     elevation = math.asin(-sun[2])
