@@ -44,7 +44,7 @@ from helio_control import lens_moves, rig_calibration, sun_sweep
 from helio_control.calibration_store import CalibrationRefused, load_calibration
 from helio_control.calibration_store import rig_description, save_calibration
 from helio_control.focus_lease import FocusLease
-from helio_control.world_calibration import estimate_world_in_robot
+from helio_control.world_calibration import estimate_world_in_robot, marker_poses
 from helio_msgs.action import (CalibrateFocus, CalibrateRig, CalibrateWorld, FocusLens,
                                MoveArm, MoveWrist, SweepSun)
 from helio_msgs.msg import FocalCalibration, LensPose, SpotObservation, SunEstimate
@@ -66,7 +66,6 @@ from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
 from helio_optics.rig_kinematics import Rig
 from helio_optics.spot import spot_area_at, SpotModel
-from helio_perception.ground_plane import marker_view_angle
 import numpy as np
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.clock import Clock, ClockType
@@ -909,31 +908,8 @@ class LensPlannerNode(Node):
 
     def _marker_poses(self, camera, count):
         """Poses high over the canvas from which the camera sees the marker (rig file)."""
-        T_robot_world = self.rig.parameters.T_robot_world
-        candidates = []
-        corners = sun_sweep.marker_corners(self.marker_side)
-        T_world_robot = np.linalg.inv(T_robot_world)
-        for px, py in self.view_points:
-            for tilt in (0.0, 15.0, 30.0):
-                for azimuth in range(0, 360, 45):
-                    axis = sun_sweep.tilted_axis(np.array([0.0, 0.0, -1.0]),
-                                                 math.radians(tilt), math.radians(azimuth))
-                    centre = transform_points(T_robot_world, [px, py, 0.0]) \
-                        + self.world_distance * axis
-                    yaw, pitch = self.rig.yaw_pitch_for_axis(axis, math.atan2(centre[1],
-                                                                              centre[0]))
-                    try:
-                        x = self.rig.inverse(centre, yaw, pitch)
-                    except ValueError:
-                        continue
-                    T_world_rgb = T_world_robot @ self.rig.forward(x).T_robot_rgb
-                    if sun_sweep.in_view(camera, T_world_rgb, corners, self.view_margin):
-                        candidates.append((marker_view_angle(T_world_rgb), x))
-        # The marker's depth is measured worst at a slant (up to 1.5 mm at 15 cm seen 40 deg
-        # off its normal, against 0.05 mm square on): keep the squarest views, spread.
-        candidates.sort(key=lambda candidate: candidate[0])
-        squarest = [x for _, x in candidates[:3 * count]]
-        return sun_sweep.spread(squarest)[:count]
+        return marker_poses(self.rig, camera, self.marker_side, self.view_points,
+                            self.world_distance, count, self.view_margin)
 
     def _save(self, name, tree, notes=None):
         return save_calibration(self.calibration_dir, name, tree, self.rig_description,

@@ -16,13 +16,17 @@ The estimate is robust: the position is the component-wise median refined by the
 the measurements within ``outlier_distance`` of it, the yaw likewise on the circle; poses
 beyond are left out and counted. The residuals are the rms spread of the measurements used.
 
-API: ``estimate_world_in_robot(T_robot_rgb, T_world_rgb, ...) -> WorldCalibration``.
+API: ``estimate_world_in_robot(T_robot_rgb, T_world_rgb, ...) -> WorldCalibration``;
+``marker_poses(rig, camera, marker_side, points, distance, count, margin)``: the arm poses
+from which the camera should see the whole marker (by the rig file), squarest views first.
 """
 
 from dataclasses import dataclass, field
 import math
 
-from helio_optics.geometry import invert_transform
+from helio_control import sun_sweep
+from helio_optics.geometry import invert_transform, transform_points
+from helio_perception.ground_plane import marker_view_angle
 import numpy as np
 
 
@@ -105,6 +109,39 @@ def estimate_world_in_robot(T_robot_rgb, T_world_rgb, min_poses=3, outlier_dista
                             residual_angle=residual_angle,
                             tilt=float(np.mean(tilts[keep])), used=int(np.count_nonzero(keep)),
                             rejected=[int(i) for i in np.flatnonzero(~keep)])
+
+
+def marker_poses(rig, camera, marker_side, points, distance=0.11, count=8, margin=30.0):
+    """
+    Return up to `count` joint vectors from which the RGB camera sees the whole marker.
+
+    The lens stands `distance` [m] over panel `points` (world (x, y)), its axis tilted 0, 15
+    or 30 deg off the vertical towards 8 azimuths; a pose counts when the rig file's
+    kinematics put the marker's corners `margin` [px] inside the image. The marker's depth
+    is measured worst at a slant (up to 1.5 mm at 15 cm seen 40 deg off its normal, against
+    0.05 mm square on): the squarest views are kept, spread over the candidates.
+    """
+    T_robot_world = rig.parameters.T_robot_world
+    T_world_robot = invert_transform(T_robot_world)
+    corners = sun_sweep.marker_corners(marker_side)
+    candidates = []
+    for px, py in points:
+        for tilt in (0.0, 15.0, 30.0):
+            for azimuth in range(0, 360, 45):
+                axis = sun_sweep.tilted_axis(np.array([0.0, 0.0, -1.0]), math.radians(tilt),
+                                             math.radians(azimuth))
+                centre = transform_points(T_robot_world, [px, py, 0.0]) + distance * axis
+                yaw, pitch = rig.yaw_pitch_for_axis(axis, math.atan2(centre[1], centre[0]))
+                try:
+                    x = rig.inverse(centre, yaw, pitch)
+                except ValueError:
+                    continue
+                T_world_rgb = T_world_robot @ rig.forward(x).T_robot_rgb
+                if sun_sweep.in_view(camera, T_world_rgb, corners, margin):
+                    candidates.append((marker_view_angle(T_world_rgb), x))
+    candidates.sort(key=lambda candidate: candidate[0])
+    squarest = [x for _, x in candidates[:3 * count]]
+    return sun_sweep.spread(squarest)[:count]
 
 
 def _wrap(angles):
