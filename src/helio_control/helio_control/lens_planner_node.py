@@ -15,8 +15,9 @@ Actions (one goal at a time across all four; a second is aborted with "busy"):
   (``world_calibration``); published on ``calibration/world_pose`` (transient local), saved,
   and used from then on by this node (and every node that follows the topic).
 - ``sweep_sun`` (SweepSun, Sec. V-B): acquire the spot when there is no estimate (the
-  ephemeris' elevation, a ring of azimuth guesses), sweep poses that change the geometry
-  (``sun_sweep``), call ``estimate_sun``.
+  ephemeris' elevation, a ring of azimuth guesses; the first spot seen gives a coarse sun,
+  its pose's lens model solved for it: ``sun_sweep.coarse_sun``), sweep poses that change
+  the geometry (``sun_sweep``), call ``estimate_sun`` on the sweep's spots.
 - ``calibrate_focus`` (CalibrateFocus, Sec. V-A): lens aligned with the estimated sun, d_lp
   swept, A_c from the spot detector, fit (``helio_optics.focal_calibration``); the heating
   distance published on ``calibration/focus`` (transient local) and saved; the lens model's
@@ -980,20 +981,29 @@ class LensPlannerNode(Node):
             for index, (azimuth, x) in enumerate(candidates):
                 report(phase='acquiring', total=len(candidates), index=index)
                 await self._move(goal_handle, x)
-                held_since = self._now()
-                seen = await self._observe(goal_handle, self.observe_frames)
+                seen = [m for m in await self._observe(goal_handle, self.observe_frames)
+                        if m.header.frame_id in ('', 'world')]
                 observations += len(seen)
                 report(observations=observations)
                 if seen:
-                    # a coarse sun is enough to choose the sweep: one pose's estimate may be
-                    # ambiguous (a twin sun), which the tilted sweep then settles
-                    response = await self._estimate(method, held_since)
-                    if response.estimate.converged:
-                        sun = point_to_array(response.estimate.direction)
-                        self.get_logger().info(
-                            f'spot found with the azimuth guess {math.degrees(azimuth):.0f} '
-                            f'deg: {response.message}')
-                        break
+                    # a coarse sun is enough to choose the sweep: this pose's spot solved for
+                    # the sun by the lens model (not the estimator's fit, whose reach leaves
+                    # out a lens facing a guessed sun; a twin sun is settled by the sweep)
+                    centres = transform_points(T_robot_world, [point_to_array(m.center)
+                                                               for m in seen])
+                    try:
+                        sun = sun_sweep.coarse_sun(
+                            self.spot_model, self.rig.forward(x).T_robot_lens, centres,
+                            T_robot_world[:3, 3], T_robot_world[:3, 2])
+                    except ValueError as error:
+                        self.get_logger().warning(f'azimuth guess {math.degrees(azimuth):.0f} '
+                                                  f'deg: {error}')
+                        continue
+                    self.get_logger().info(
+                        f'spot found with the azimuth guess {math.degrees(azimuth):.0f} deg: '
+                        f'a coarse sun {math.degrees(math.asin(-sun[2])):.2f} deg up, azimuth '
+                        f'{math.degrees(math.atan2(-sun[1], -sun[0])):.2f} deg (robot frame)')
+                    break
             if sun is None:
                 raise GoalFailed(f'the spot was not found at any of {len(candidates)} azimuth '
                                  'guesses (clouds? the camera? the marker?)')

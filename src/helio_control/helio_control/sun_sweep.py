@@ -32,8 +32,10 @@ import math
 
 from helio_control.lens_moves import focus_point
 from helio_optics.geometry import direction_from_angles, invert_transform, transform_points
+from helio_optics.geometry import unit
 from helio_optics.rig_kinematics import UnreachableError
 import numpy as np
+from scipy.optimize import least_squares
 
 
 def marker_corners(marker_side):
@@ -250,6 +252,67 @@ def sweep_poses(rig, T_robot_world, sun, camera, marker_side, points, count=6,
             if queue and len(chosen) < count:
                 chosen.append(queue.pop(0))
     return chosen
+
+
+def chief_ray_sun(lens_centre, spot_centre):
+    """
+    Return the ray (unit) from the lens centre `lens_centre` to `spot_centre` (3,) [m].
+
+    A thin lens does not deviate the ray through its centre, but the spot's middle is not
+    where that ray lands: a low sun casts the rim's cone on the ground as an ellipse whose
+    centre lies off the cone's axis (8 deg of ray at a 31 deg sun with the lens 3 cm out of
+    focus). A start for `coarse_sun`, not a sun.
+    """
+    ray = np.asarray(spot_centre, dtype=float) - np.asarray(lens_centre, dtype=float)
+    length = float(np.linalg.norm(ray))
+    if not (math.isfinite(length) and length > 0.0):
+        raise ValueError('no chief ray: the spot centre is not finite or lies at the lens')
+    return ray / length
+
+
+def coarse_sun(spot_model, T_robot_lens, spot_centres, plane_point, plane_normal,
+               tolerance=1e-3):
+    """
+    Return the sun ray (unit, robot frame) that casts one still pose's spot where it was seen.
+
+    The acquisition's coarse sun (Sec. V-B): the lens model (`spot_model`, a
+    ``helio_optics.spot.SpotModel``) at the pose `T_robot_lens` is solved for the sun's
+    elevation and azimuth that put its spot centre on the median of `spot_centres` (N, 3)
+    [m, robot frame] on the plane, from the chief ray (`chief_ray_sun`). Two equations in
+    two unknowns: one pose may have a twin sun a degree or two away, and the model's centre
+    errs by millimetres where the lens faces far off the sun, so this only chooses the
+    sweep's poses; the estimator's fit on the sweep decides. ValueError when no sun puts
+    the spot within `tolerance` [m] of where it was seen.
+    """
+    seen = np.median(np.atleast_2d(np.asarray(spot_centres, dtype=float)), axis=0)
+    pose = np.asarray(T_robot_lens, dtype=float)[None]
+    chief = chief_ray_sun(pose[0, :3, 3], seen)
+    if chief[2] >= 0.0:
+        raise ValueError('the spot lies above the lens: no sun casts it')
+
+    def miss(p):
+        centre = spot_model.centres(sun_ray(*p), pose, plane_point, plane_normal)[0]
+        return 1e3 * (centre - seen) if np.all(np.isfinite(centre)) else np.full(3, 1e3)
+    # from the chief ray, else from the lens axis (the lens faces the guessed sun) and
+    # between them: where the rim's rays are lost (no spot by the model) no step can start
+    fit = None
+    for start in (chief, unit(chief - pose[0, :3, 2]), -pose[0, :3, 2]):
+        if start[2] >= 0.0:
+            continue
+        angles = np.array([math.asin(-start[2]), math.atan2(-start[1], -start[0])])
+        if not np.all(np.abs(miss(angles)) < 1e3):
+            continue
+        fit = least_squares(miss, angles, bounds=([1e-3, -np.inf], [0.5 * math.pi, np.inf]),
+                            x_scale=0.1)
+        if np.linalg.norm(fit.fun) * 1e-3 <= tolerance:
+            break
+    if fit is None:
+        raise ValueError('no sun casts the spot where it was seen: the lens model casts no '
+                         'spot from this pose for the suns tried')
+    if not np.linalg.norm(fit.fun) * 1e-3 <= tolerance:
+        raise ValueError(f'no sun casts the spot where it was seen: the lens model misses it '
+                         f'by {np.linalg.norm(fit.fun):.1f} mm at best')
+    return sun_ray(*fit.x)
 
 
 def spread(poses):

@@ -7,10 +7,11 @@ that a level lens cannot.
 
 import math
 
-from helio_control.sun_sweep import acquisition_poses, in_view, in_view_many, marker_corners
+from helio_control.sun_sweep import acquisition_poses, chief_ray_sun, coarse_sun, in_view
+from helio_control.sun_sweep import in_view_many, marker_corners
 from helio_control.sun_sweep import sees_marker_and_spot, spot_separation, sun_ray
 from helio_control.sun_sweep import sweep_poses, tilted_axis, view_points
-from helio_optics.geometry import invert_transform, PinholeCamera
+from helio_optics.geometry import homogeneous, invert_transform, PinholeCamera
 from helio_optics.lens import LensParameters
 from helio_optics.rig_kinematics import Rig
 from helio_optics.spot import SpotModel
@@ -138,3 +139,51 @@ def test_in_view_of_many_camera_poses_is_in_view_of_each(rig):
     corners = marker_corners(MARKER_SIDE)          # one set of points for every pose
     seen, _ = in_view_many(CAMERA, poses, corners, 30.0)
     assert [bool(each) for each in seen] == [in_view(CAMERA, T, corners, 30.0) for T in poses]
+
+
+def lens_facing(axis, centre):
+    """Return T_robot_lens with its z axis along `axis` (towards the sun) at `centre`."""
+    z = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    x = np.cross([0.0, 1.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    return homogeneous(np.column_stack([x, np.cross(z, x), z]), centre)
+
+
+def test_the_coarse_sun_of_one_pose_is_the_sun_that_casts_its_spot(rig):
+    # a round trip through the lens model: poses as the acquisition's, a lens facing 0-15 deg
+    # off suns 31-70 deg up, 2.2 cm in front of the focus to 3 cm behind it
+    model = SpotModel(LensParameters())
+    T = rig.parameters.T_robot_world
+    rng = np.random.default_rng(12)
+    errors, noisy_errors = [], []
+    for elevation in (31.0, 50.0, 70.0):
+        sun = sun_ray(math.radians(elevation), math.radians(rng.uniform(0.0, 360.0)))
+        for tilt in (0.0, 8.0, 15.0):
+            for turn in (0.0, 90.0, 180.0, 270.0):
+                for distance in (0.060, 0.082, 0.112):
+                    centre = T[:3, 3] + [0.06, 0.06, 0.0] - distance * sun
+                    pose = lens_facing(tilted_axis(sun, math.radians(tilt),
+                                                   math.radians(turn)), centre)
+                    spot = model.centres(sun, pose[None], T[:3, 3], T[:3, 2])[0]
+                    found = coarse_sun(model, pose, [spot], T[:3, 3], T[:3, 2])
+                    errors.append(math.degrees(math.acos(min(1.0, float(found @ sun)))))
+                    # a twin sun casts the same spot: the model puts it where it was seen
+                    again = model.centres(found, pose[None], T[:3, 3], T[:3, 2])[0]
+                    assert np.linalg.norm(again - spot) < 1e-5
+                    seen = spot + np.append(rng.normal(0.0, 0.3e-3, 2), 0.0)
+                    found = coarse_sun(model, pose, [seen], T[:3, 3], T[:3, 2])
+                    noisy_errors.append(math.degrees(math.acos(min(1.0, float(found @ sun)))))
+    errors = np.array(errors)
+    print(f'coarse sun: {np.mean(errors < 0.01) * 100:.0f} % within 0.01 deg, worst '
+          f'{errors.max():.2f} deg; with 0.3 mm of centre noise worst '
+          f'{max(noisy_errors):.2f} deg')
+    assert np.mean(errors < 0.01) >= 0.9 and errors.max() < 3.0
+    assert max(noisy_errors) < 3.0
+    # the chief ray alone, where the spot is wide and the sun low, is degrees off
+    pose = lens_facing(-sun_ray(math.radians(31.0), 0.0), T[:3, 3] + [0.06, 0.06, 0.112])
+    spot = model.centres(sun_ray(math.radians(31.0), 0.0), pose[None], T[:3, 3],
+                         T[:3, 2])[0]
+    chief = chief_ray_sun(pose[:3, 3], spot)
+    assert math.degrees(math.acos(float(chief @ sun_ray(math.radians(31.0), 0.0)))) > 2.0
+    with pytest.raises(ValueError, match='above the lens'):
+        coarse_sun(model, pose, [pose[:3, 3] + [0.0, 0.0, 0.01]], T[:3, 3], T[:3, 2])
