@@ -90,6 +90,10 @@ def test_paint_options_are_the_goal_fields_one_to_one():
     paint = subprocess.run(HELIO + ['paint', '--help'], capture_output=True, text=True,
                            timeout=60).stdout
     assert text and all(f'--{name.replace("_", "-")}' in paint for name in options)
+    # each with its meaning and unit from the action's own comments, not "goal field NAME"
+    flat = ' '.join(paint.split())
+    assert 'goal field' not in flat
+    assert 'dot_radius: projected spot radius r_p [m]' in flat
 
 
 @pytest.mark.parametrize('arguments, status, message', [

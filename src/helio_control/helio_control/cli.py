@@ -97,21 +97,32 @@ def _point(text):
     return x, y
 
 
-def add_goal_options(parser, goal_type):
-    """Add one option per goal field (see `goal_options`)."""
+def add_goal_options(parser, goal_type, comments=None):
+    """
+    Add one option per goal field (see `goal_options`).
+
+    Each option's help is its field's comment in the action's definition (`comments`:
+    {field: comment}, by default read from the installed PaintPattern.action), where its unit
+    and meaning are written once.
+    """
+    if comments is None:
+        from helio_control import action_docs
+        comments = action_docs.field_comments(
+            action_docs.installed_action_text('helio_msgs', 'PaintPattern'))
     group = parser.add_argument_group('PaintPattern goal fields (unset: the painter default)')
     for name, kind, option in goal_options(goal_type):
+        meaning = comments.get(name, '').replace('%', '%%')
+        text = f'{name}: {meaning}' if meaning else f'goal field {name}'
         if kind == 'bool':
             group.add_argument(option, dest=f'goal_{name}', action='store_true', default=None,
-                               help=f'goal field {name}')
+                               help=text)
         elif kind == 'points':
             group.add_argument(option, dest=f'goal_{name}', nargs='+', type=_point,
-                               metavar='X,Y', help=f'goal field {name}: world points [m]')
+                               metavar='X,Y', help=text)
         else:
             convert = {'float': _finite_float, 'int': _non_negative_int, 'signed': int,
                        'str': str}[kind]
-            group.add_argument(option, dest=f'goal_{name}', type=convert,
-                               help=f'goal field {name} ({kind})')
+            group.add_argument(option, dest=f'goal_{name}', type=convert, help=text)
 
 
 def build_goal(goal_type, arguments, picture):
