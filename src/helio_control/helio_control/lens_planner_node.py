@@ -64,6 +64,7 @@ from helio_optics.node_kit.deployment import follow_world_calibration, RIG_CALIB
 from helio_optics.node_kit.emergency_stop import EmergencyStopListener
 from helio_optics.node_kit.joint_states import JointStateBuffer
 from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.qos import LATCHED, reliable
 from helio_optics.node_kit.runner import run_node
 from helio_optics.rig_kinematics import Rig
 from helio_optics.spot import spot_area_at, SpotModel
@@ -71,15 +72,12 @@ import numpy as np
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
-from rclpy.qos import ReliabilityPolicy
+from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import Header, String
 import yaml
 
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
-RELIABLE = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+RELIABLE = reliable(50)
 
 
 class GoalFailed(Exception):

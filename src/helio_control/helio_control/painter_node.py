@@ -87,19 +87,17 @@ from helio_optics.node_kit.deployment import declare_rig, declare_site
 from helio_optics.node_kit.deployment import follow_world_calibration
 from helio_optics.node_kit.emergency_stop import EmergencyStopListener
 from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.qos import LATCHED, reliable
 from helio_optics.node_kit.runner import run_node
 from helio_optics.rig_kinematics import escape_lift, escape_pitch, UnreachableError
 import numpy as np
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
-RELIABLE = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE)
+RELIABLE = reliable(20)
 COOLING_RULES = ('paper', 'window')
 # Goal fields that do not change what is painted (a resumed goal may differ in them).
 NOT_THE_PICTURE = ('run_dir', 'fresh', 'start_index', 'dry_run')

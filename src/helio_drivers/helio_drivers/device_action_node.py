@@ -71,12 +71,12 @@ from helio_msgs.msg import DeviceStatus
 from helio_optics.node_kit import emergency_stop
 from helio_optics.node_kit.emergency_stop import EmergencyStopListener
 from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.qos import latched
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
@@ -221,8 +221,7 @@ class DeviceActionNode(Node):
         self.joint_publisher = self.create_publisher(JointState, 'joint_states', 10)
         self.status_publisher = self.create_publisher(
             DeviceStatus, f'{spec.device}/status',
-            QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL))
+            latched(5))
         # Every /clock tick wakes the device thread: joint states and move polls follow
         # simulated time (no effect on a clock that is not driven by /clock)
         self._clock_tick = self.get_clock().create_jump_callback(

@@ -44,11 +44,12 @@ from helio_optics.node_kit.deployment import declare_lens, declare_rig, declare_
 from helio_optics.node_kit.deployment import follow_world_calibration
 from helio_optics.node_kit.joint_states import JointStateBuffer
 from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.qos import LATCHED
 from helio_optics.node_kit.runner import run_node
 from helio_optics.sun_estimation import METHODS, Observation, SunEstimator, TrustSettings
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 
@@ -101,9 +102,7 @@ class SunEstimatorNode(Node):
         self._skipped = collections.Counter()   # spots left out since the start, by why
         self._estimate = None    # (SunEstimate message at the anchor, anchor SunPosition)
         self.estimate_publisher = self.create_publisher(
-            SunEstimate, 'sun/estimate',
-            QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL))
+            SunEstimate, 'sun/estimate', LATCHED)
         self.create_subscription(JointState, 'joint_states', self._on_joint_state, 50)
         self.create_subscription(SpotObservation, 'spot', self._on_spot, 20)
         # A deep request queue: with the default 10, requests arriving while one estimate ran

@@ -35,6 +35,7 @@ from helio_optics.node_kit.diagnostics import diagnostic_array, ERROR
 from helio_optics.node_kit.joint_states import CAMERA_NODE_JOINT_STATE_DEPTH, JointStateBuffer
 from helio_optics.node_kit.parameters import declare, declare_joint_lookup
 from helio_optics.node_kit.process_tuning import frozen_after_start_up
+from helio_optics.node_kit.qos import LATCHED, reliable
 from helio_optics.node_kit.runner import run_node
 from helio_perception.frame_statistics import FrameStatistics, InputFreshness
 from helio_perception.ground_plane import GroundMapping
@@ -42,8 +43,7 @@ from helio_perception.thermal import ThermalAnalyzer, ThermalConfig, window_mask
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
-from rclpy.qos import ReliabilityPolicy
+from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
 
@@ -88,7 +88,7 @@ class ThermalMonitorNode(Node):
         self.camera = None
         self.stats_pub = self.create_publisher(
             ThermalStats, 'thermal/stats',
-            QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+            reliable(10))
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(Image, 'thermal/image_raw', self.on_image,
                                  qos_profile_sensor_data)
@@ -99,9 +99,7 @@ class ThermalMonitorNode(Node):
         self.window = None           # (x, y, radius) [m] in the world frame, or None
         self._window_mask = (None, None)   # (key, mask) of the last pose and window
         self.create_subscription(
-            PointStamped, 'thermal/window', self.on_window,
-            QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL))
+            PointStamped, 'thermal/window', self.on_window, LATCHED)
         if self.diagnostics_period > 0:
             # wall time: the node clock stops with /clock, and that must be reported too
             self.create_timer(self.diagnostics_period, self.publish_diagnostics,

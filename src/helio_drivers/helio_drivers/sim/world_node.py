@@ -86,12 +86,13 @@ from helio_optics.node_kit.conversions import serialized_image, serialized_pose_
 from helio_optics.node_kit.conversions import stamp_to_seconds
 from helio_optics.node_kit.deployment import rig_file_or_default, RIG_FILE_PARAMETER
 from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.qos import LATCHED
 from helio_optics.node_kit.runner import run_node
 from helio_optics.rig_kinematics import load_rig_parameters
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
+from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from rclpy.qos import ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
@@ -111,8 +112,7 @@ class CameraTopics:
     info_bytes: bytes
 
 
-TRUTH_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+TRUTH_QOS = LATCHED
 
 # name: (description, minimum, maximum); ranges only for numbers.
 PARAMETER_DOCS = {

@@ -16,6 +16,7 @@ from helio_optics.ephemeris import load_site
 from helio_optics.lens import load_lens_parameters
 from helio_optics.node_kit.conversions import pose_to_matrix
 from helio_optics.node_kit.parameters import declare
+from helio_optics.node_kit.qos import LATCHED
 from helio_optics.rig_kinematics import load_rig_parameters, Rig
 
 WORLD_CALIBRATION_TOPIC = 'calibration/world_pose'
@@ -79,7 +80,6 @@ def follow_world_calibration(node, rig, on_update=None):
     and changes nothing.
     `on_update(rig)` is called after each change. Return the two subscriptions.
     """
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from std_msgs.msg import String
     import yaml
 
@@ -113,7 +113,6 @@ def follow_world_calibration(node, rig, on_update=None):
         if on_update is not None:
             on_update(rig)
 
-    qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    qos = LATCHED
     return (node.create_subscription(PoseStamped, WORLD_CALIBRATION_TOPIC, apply, qos),
             node.create_subscription(String, RIG_CALIBRATION_TOPIC, apply_rig, qos))

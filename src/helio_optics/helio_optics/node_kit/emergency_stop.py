@@ -16,14 +16,13 @@ it) and refuses goals; until the reset. Relative names: the stop belongs to the 
 namespace.
 """
 
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from helio_optics.node_kit.qos import LATCHED
 from std_msgs.msg import Bool
 
 TOPIC = 'emergency_stop'
 SERVICE = 'emergency_stop'
 RESET_SERVICE = 'emergency_stop_reset'
-QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
+QOS = LATCHED
 HOW_TO_RESET = ('reset it with `helio reset` (or ros2 service call /emergency_stop_reset '
                 'std_srvs/srv/Trigger) once the rig is safe')
 

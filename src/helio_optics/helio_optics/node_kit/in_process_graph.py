@@ -21,15 +21,14 @@ process in the same ``ROS_DOMAIN_ID``, so a test run picks a private domain.
 import threading
 import time
 
+from helio_optics.node_kit.qos import latched
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 DEFAULT_TIMEOUT = 15.0
-TRANSIENT_LOCAL_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
+TRANSIENT_LOCAL_QOS = latched(10)
 
 
 # a goal request unanswered this long is sent again (``send_goal``) [s]
