@@ -10,6 +10,7 @@ The ``helio`` command: run the graph, paint, record, replay, report.
     helio record --out DIR [--camera-decimation N] [--sim-time] | --recover BAG
     helio replay BAG [--rate R] [--delay S] [--exclude TOPIC ...]
     helio report RUN_DIR
+    helio print marker|board --out FILE.png|pdf [--side M] ...   (a sheet to print at 1:1)
     helio udev [--install]                           (the serial devices' udev rule)
     helio calibrations [--dir DIR] [--rig FILE]      (what is saved, and for which rig)
     helio calibrate rig|world [--poses N] [--no-apply]   (run one on the running graph)
@@ -300,6 +301,33 @@ def command_report(arguments):
     from helio_control.report import make_report
     report = make_report(arguments.run_dir)
     print(report.html_path)
+    return EXIT_OK
+
+
+def command_print(arguments):
+    """Write the marker or board sheet; say what was written and what to measure."""
+    from helio_control.print_sheets import board_sheet, marker_sheet, write_sheet
+    try:
+        if arguments.what == 'marker':
+            sheet = marker_sheet(arguments.side, arguments.marker_id,
+                                 arguments.dictionary or 'DICT_4X4_50', arguments.paper,
+                                 arguments.dpi)
+        else:
+            try:
+                squares = tuple(int(v) for v in arguments.squares.lower().split('x'))
+            except ValueError:
+                squares = ()
+            if len(squares) != 2:
+                raise ValueError(f'--squares is COLUMNSxROWS, e.g. 7x5, not '
+                                 f'{arguments.squares!r}')
+            sheet = board_sheet(squares, arguments.square, arguments.marker,
+                                arguments.dictionary or 'DICT_5X5_100', arguments.paper,
+                                arguments.dpi)
+        write_sheet(sheet, arguments.out)
+    except (ValueError, OSError) as error:
+        raise CommandError(str(error)) from None
+    print(f'{arguments.out} written ({arguments.paper}, {arguments.dpi} dpi): '
+          + '; '.join(sheet.text[:2]))
     return EXIT_OK
 
 
@@ -626,6 +654,28 @@ def build_parser(action_type=None):
                                  'into RUN_DIR.')
     report.add_argument('run_dir', help='run directory (runs/<UTC time>)')
     report.set_defaults(handler=command_report)
+
+    sheet = commands.add_parser(
+        'print', help='a sheet to print at 1:1: the ground marker or a ChArUco board',
+        description='Write the ground marker (or a ChArUco calibration board) at its true '
+        'size on an A4 or letter page, with a 100 mm scale bar, as PNG or PDF: print it at '
+        '100 %%, measure it, and enter the measured size in the configuration.')
+    sheet.add_argument('what', choices=('marker', 'board'), help='the marker or the board')
+    sheet.add_argument('--out', required=True, help='file to write (.png or .pdf)')
+    sheet.add_argument('--paper', choices=('a4', 'letter'), default='a4', help='page size')
+    sheet.add_argument('--dpi', type=_positive_int, default=600, help='pixels per inch')
+    sheet.add_argument('--side', type=_finite_float, default=0.04,
+                       help="marker: black square [m] (spot_detector's marker.side)")
+    sheet.add_argument('--id', type=_non_negative_int, default=0, dest='marker_id',
+                       help="marker: ArUco id (spot_detector's marker.id)")
+    sheet.add_argument('--dictionary', default=None,
+                       help='ArUco dictionary (marker: DICT_4X4_50; board: DICT_5X5_100)')
+    sheet.add_argument('--squares', default='7x5', help='board: columns x rows')
+    sheet.add_argument('--square', type=_finite_float, default=0.025,
+                       help='board: square side [m]')
+    sheet.add_argument('--marker', type=_finite_float, default=0.018,
+                       help="board: its markers' side [m]")
+    sheet.set_defaults(handler=command_print)
 
     udev = commands.add_parser('udev', help="the udev rule of the rig's serial devices",
                                description='Print the udev rule that gives the Dobot and the '
