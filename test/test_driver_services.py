@@ -7,8 +7,13 @@ other entity of it (the timers, /clock, the guard condition that brings the answ
 its wait set: ``dobot/clear_alarms`` and ``dobot/home`` never answered, and the driver took
 no goal after them (issue 35). The node's own in-process test did not show it: other nodes
 in that process kept waking the executor.
+
+Last, a driver signalled (Ctrl-C or SIGTERM, as ``ros2 launch`` signals every node at once)
+goes on serving goals until none has come for ``shutdown_grace``, then stops (issue 30).
 """
 
+import math
+import signal
 import time
 
 from conftest import graph_of_processes, wait_for_devices
@@ -71,3 +76,29 @@ def test_after_a_joint_limit_alarm_goals_are_refused_until_clear_alarms_answers_
                                timeout=60.0)
         assert moved.result.success, moved.result.message
         assert list(moved.result.achieved_joints) == pytest.approx(target, abs=1e-3)
+
+
+def test_a_signalled_driver_serves_the_goals_that_follow_then_stops(tmp_path):
+    # issue 30: ros2 launch signals every node at once, and the lens planner's retreat comes
+    # after its own signal: the driver must still move the arm, then stop on its own
+    with DobotEmulator() as emulator, graph_of_processes(
+            tmp_path, ('dobot_driver',), {'dobot_driver': {'port': emulator.port_path}},
+            may_die=('dobot_driver',)) as (group, graph):
+        wait_for_devices(graph, 60.0, ('dobot',))
+        arm = graph.action_client(MoveArm, 'move_arm', ANSWER_TIMEOUT)
+        driver = next(p for p in group.processes if p.label == 'dobot_driver')
+        driver.signal(signal.SIGINT)
+        signalled = time.monotonic()
+        target = [0.2, 0.5, 0.5, 0.0]
+        moved = graph.run_goal(arm, MoveArm.Goal(mode=MoveArm.Goal.MOVJ_ANGLE, target=target),
+                               timeout=60.0)
+        ended = time.monotonic()
+        assert moved.result.success, moved.result.message
+        assert emulator.joint_positions_deg()[0] == pytest.approx(math.degrees(0.2), abs=0.1)
+        # then it stops by itself, a grace (0.5 s) after the last goal
+        status = driver.process.wait(30.0)
+        gone = time.monotonic()
+        print(f'\ngoal served {ended - signalled:.2f} s after SIGINT; the driver exited '
+              f'{gone - ended:.2f} s after it, status {status}')
+        assert gone - ended >= 0.5
+        assert status == 0, driver.tail()

@@ -15,16 +15,23 @@ order a painting uses them:
   concentrated light) on canvas targets across the paper's 5 cm offset canvas;
 - a cancel mid-move stops both devices at once;
 - ``calibrate_rig`` finds the ideal build the rig file describes, and the sun estimator
-  estimates with the calibration it published.
+  estimates with the calibration it published;
+- last, every node but the world signalled at once mid-heat, as ``ros2 launch`` stops a
+  graph on Ctrl-C (issue 30): the drivers go on serving until no goal comes, so the lens
+  planner still retreats the lens, and the focus is off the wood within 0.5 s of simulated
+  time (the world, the outer edge, runs on at half real time for it: the reaction measured
+  is the graph's, not the simulation's pace).
 """
 
 import math
+import signal
 import time
 
 from conftest import graph_of_processes, wait_for_devices
 from geometry_msgs.msg import Point, PointStamped, PoseStamped, Vector3Stamped
 from helio_msgs.action import CalibrateFocus, CalibrateRig, CalibrateWorld, FocusLens
 from helio_msgs.action import SweepSun
+from helio_msgs.msg import LightTruth
 from helio_msgs.srv import EstimateSun
 from helio_optics.node_kit.conversions import point_to_array, pose_to_matrix
 from helio_optics.node_kit.conversions import stamp_to_seconds
@@ -32,6 +39,10 @@ from helio_optics.node_kit.in_process_graph import TRANSIENT_LOCAL_QOS
 from helio_optics.rig_kinematics import default_rig_file
 import numpy as np
 import pytest
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 import yaml
@@ -81,8 +92,9 @@ def focus_goal(x, y, z=0.0, d_lp=0.0):
 class Planner:
     """The test's client of the lens planner, and the world's truth."""
 
-    def __init__(self, graph):
-        self.graph = graph
+    def __init__(self, graph, group=None, may_die=None):
+        self.graph, self.group = graph, group
+        self.may_die = set() if may_die is None else may_die     # nodes a test may stop
         wait_for_devices(graph, 60.0)
         self.truth_world = graph.collect(PoseStamped, 'sim/truth/world_pose',
                                          TRANSIENT_LOCAL_QOS)
@@ -126,13 +138,15 @@ def planner(tmp_path_factory):
     # goal's present joints are judged by their wall-clock receipt (joint_state_max_wall_age),
     # the lens planner's path for a clock that runs ahead of the joint states. The world runs
     # free: in lockstep with every consumer of it (issue 31)
-    overrides = {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000},
+    overrides = {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000,
+                               'truth_period': 0.05},
                  'spot_detector': rig, 'sun_estimator': {**rig, **site},
                  'lens_planner': {**rig, **site, 'joint_state_max_age': 0.01,
                                   'calibration_dir': str(tmp_path / 'calibration'),
                                   'rig_calibration.spot_poses': 8}}
-    with graph_of_processes(tmp_path, NODES, overrides) as (_, graph):
-        yield Planner(graph)
+    may_die = set()         # filled by the last test, which stops every node but the world
+    with graph_of_processes(tmp_path, NODES, overrides, may_die=may_die) as (group, graph):
+        yield Planner(graph, group, may_die)
 
 
 def test_goals_that_cannot_be_served_are_refused_with_the_reason(planner):
@@ -278,3 +292,37 @@ def test_the_rig_calibration_finds_the_ideal_build_and_every_node_takes_it(plann
     error = angle_deg(point_to_array(result.estimate.direction), point_to_array(sun.vector))
     print(f'the sun estimated with it: {error:.3f} deg from the truth')
     assert error < 0.5
+
+
+def test_every_node_signalled_at_once_mid_heat_still_takes_the_focus_off_the_wood(planner):
+    # the module's last test: every node but the world is stopped
+    graph = planner.graph
+    light = graph.collect(LightTruth, 'sim/truth/light',
+                          QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE))
+    clock = graph.collect(Clock, '/clock', QoSProfile(depth=10))
+    response = planner.run(FocusLens, 'focus', focus_goal(0.07, 0.08))    # heating distance
+    assert response.result.success, response.result.message
+    world = AsyncParameterClient(graph.helper, 'sim_world')
+    graph.wait_until(world.services_are_ready, 60.0, 'sim_world parameters')
+    graph.on_executor(lambda: world.set_parameters(
+        [Parameter('real_time_factor', value=0.5)]), 60.0, 'the parameter response')
+
+    def now():
+        return stamp_to_seconds(clock.wait_for_count(1, 60.0)[-1].clock)
+    settled = now() + 0.5
+    clock.wait_until(lambda m: m and stamp_to_seconds(m[-1].clock) >= settled, 60.0, '0.5 s')
+    peak = max(m.peak_irradiance for m in light.messages
+               if stamp_to_seconds(m.header.stamp) >= settled - 0.3)
+    stopped = [p for p in planner.group.processes if p.label != 'sim_world']
+    planner.may_die.update(p.label for p in stopped)
+    since = now()
+    for process in stopped:                   # what ros2 launch does on Ctrl-C
+        process.signal(signal.SIGINT)
+    off = light.wait_for_message(lambda m: stamp_to_seconds(m.header.stamp) >= since
+                                 and m.peak_irradiance < 0.25 * peak, 60.0)
+    delay = stamp_to_seconds(off.header.stamp) - since
+    statuses = {p.label: p.process.wait(30.0) for p in stopped}
+    print(f'\nevery node signalled at once: the focus off the wood {delay:.2f} s (sim) after '
+          f'it; exit statuses {statuses}')
+    assert delay <= 0.5
+    assert all(status == 0 for status in statuses.values()), statuses

@@ -69,6 +69,7 @@ from helio_drivers.serial_link import (
     PortBusyError, ReconnectBackoff)
 from helio_msgs.msg import DeviceStatus
 from helio_optics.node_kit import emergency_stop
+from helio_optics.node_kit.awaitables import sleep
 from helio_optics.node_kit.emergency_stop import EmergencyStopListener
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.qos import latched
@@ -189,6 +190,16 @@ class DeviceActionNode(Node):
             self, 'move_wall_timeout', 10.0 * spec.move_timeout,
             'Longest wall-clock time a move may take whatever the node clock says, so that a '
             'stopped /clock cannot hold a goal [s].', 0.1, 10.0 * spec.move_timeout_max)
+        self.shutdown_grace = declare(
+            self, 'shutdown_grace', 0.5,
+            'On Ctrl-C or SIGTERM the driver goes on serving goals until none has run for '
+            'this long (at most interrupt_timeout): ros2 launch signals every node at once, '
+            'and the painter and the lens planner then still take the focus off the wood '
+            'through it (0: stop at once) [s].', 0.0, 10.0)
+        self.interrupt_timeout = declare(
+            self, 'interrupt_timeout', 5.0,
+            'Ctrl-C or SIGTERM: the longest the driver goes on serving goals before it stops '
+            'the device and exits (a second signal: at once) [s].', 0.1, 60.0)
         self.stop_timeout = declare(
             self, 'stop_timeout', 2.0,
             f'How long to keep trying to stop the {spec.label} and confirm it stands still '
@@ -723,6 +734,25 @@ class DeviceActionNode(Node):
             self._release()
 
     # ---- shutdown ---------------------------------------------------------------------------
+
+    async def on_interrupt(self):
+        """
+        Ctrl-C or SIGTERM: go on serving goals until none has run for ``shutdown_grace``.
+
+        ``run_node`` runs this with the node still up, for at most ``interrupt_timeout``
+        (issue 30). ``ros2 launch`` signals every node at once: the lens planner, stopping
+        too, retreats a lens left at the heating distance through the drivers, which must
+        still answer; ``helio sim`` and ``helio rig`` signal the drivers last, when no goal
+        comes any more, and they then stop after the grace.
+        """
+        quiet_since = time.monotonic()
+        while True:
+            now = time.monotonic()
+            if self._busy:
+                quiet_since = now
+            elif now - quiet_since >= self.shutdown_grace:
+                return
+            await sleep(self, 0.02, wall=True)
 
     def destroy_node(self):
         """Stop the device thread, leave the device stopped, then destroy the node."""
