@@ -17,7 +17,7 @@ from helio_optics.sun_estimation import TrustSettings
 import numpy as np
 import pytest
 
-SWEEPS = 16       # 8 tilted and 8 level-lens sweeps: about 40 s here
+SWEEPS = 10       # 5 tilted and 5 level-lens sweeps: about 20 s here
 
 
 @pytest.fixture(scope='module')
