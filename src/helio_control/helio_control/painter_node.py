@@ -33,8 +33,9 @@ Beyond the paper:
   silent or faulted), the arm alone lifts the lens straight up by ``arm_escape_lift``, a
   ``move_arm`` goal (``escape_lift``); a retreat goal not accepted within
   ``retreat_accept_timeout`` of wall time, as a killed lens planner's never is, goes to the
-  wrist at once, and any goal not accepted within ``goal_accept_timeout`` fails the painting;
-  a goal accepted after the painter gave up on it is cancelled).
+  wrist at once (the lens planner's goal, accepted late, is cancelled); the last way, the
+  wrist's escape or the arm's lift, waits ``goal_accept_timeout``, and any other goal not
+  accepted within that fails the painting).
   A stale stream then gets ``thermal_back_timeout`` to come back (the dot is heated again from
   the start, and the result counts it); everything else ends the goal saying why. A window-rule
   frame without a camera pose is fresh data without a window reading: heat on while the image's
@@ -448,7 +449,7 @@ class PainterNode(Node):
         except TimeoutError as error:
             raise PaintFailed(str(error)) from None
 
-    async def _run_action(self, client, name, goal, urgent=False):
+    async def _run_action(self, client, name, goal, urgent=False, last=False):
         """
         Send a goal and return its result (PaintFailed when refused).
 
@@ -456,7 +457,10 @@ class PainterNode(Node):
         server stays discovered for seconds and never answers; a lens left at the heating
         distance then goes to ``_retreat``). `urgent` (``_retreat``): no wait for a server
         that is not there, and ``retreat_accept_timeout`` instead: the retreat then turns to
-        the wrist at once.
+        the next way at once, and a goal accepted after that is cancelled. The `last` way
+        (the wrist's escape, the arm's lift) has no next: it gets ``goal_accept_timeout``, and
+        a late acceptance is better than none (a killed node can stall the others' DDS
+        writes for a second: the wrist's driver then goes silent and the arm's accepts late).
         """
         if not urgent:
             await self._server(client, name)
@@ -464,12 +468,13 @@ class PainterNode(Node):
             raise PaintFailed(f'no {name} server (its node is gone)')
         # a killed server stays discovered for seconds and never answers: every goal must be
         # accepted within a bound, or the painting fails (and retreats) instead of waiting
-        limit = self.retreat_accept_timeout if urgent else self.goal_accept_timeout
+        limit = self.retreat_accept_timeout if urgent and not last else self.goal_accept_timeout
         sent = client.send_goal_async(goal)
         if not await within(self, sent, limit, wall=True):
-            # accepted after all, late (a loaded machine): cancelled, so that it does not
-            # move the lens against the next way the painter takes
-            sent.add_done_callback(_cancel_if_accepted)
+            if urgent and not last:
+                # accepted after all, late (a loaded machine): cancelled, so that it does not
+                # move the lens against the next way the painter takes
+                sent.add_done_callback(_cancel_if_accepted)
             raise PaintFailed(f'{name} did not accept the goal within {limit:g} s (is its node '
                               'running?)')
         handle = sent.result()
@@ -515,7 +520,8 @@ class PainterNode(Node):
             pitch = escape_pitch(float(self.joints_now.get('lens_pitch', 0.0)), self.wrist_turn)
             result = await self._run_action(self.wrist, 'move_wrist',
                                             MoveWrist.Goal(yaw=yaw, pitch=pitch,
-                                                           escape=True), urgent=True)
+                                                           escape=True), urgent=True,
+                                            last=True)
             if result.success:
                 self._at_heating = None
                 return f'the arm could not retreat ({failure}); the wrist turned the lens away'
@@ -539,7 +545,7 @@ class PainterNode(Node):
                                  self.arm_lift)
             goal = MoveArm.Goal(mode=MoveArm.Goal.MOVJ_ANGLE, target=[
                 *(float(v) for v in joints), float(self.joints_now.get('dobot_j4', 0.0))])
-            result = await self._run_action(self.arm, 'move_arm', goal, urgent=True)
+            result = await self._run_action(self.arm, 'move_arm', goal, urgent=True, last=True)
         except (UnreachableError, PaintFailed) as error:
             return f'RETREAT FAILED: {wrist_fault}; the arm could not lift the lens: {error}'
         if not result.success:
