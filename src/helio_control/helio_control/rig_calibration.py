@@ -38,11 +38,11 @@ their uncertainties, ``build_terms(parameters)`` the flat values a calibration s
 from dataclasses import dataclass, field, replace
 import math
 
-from helio_control.sun_sweep import in_view, marker_corners, spread, tilted_axis
+from helio_control.sun_sweep import spread
+from helio_control.world_calibration import marker_view_candidates
 from helio_optics.geometry import angles_from_direction, direction_from_angles
-from helio_optics.geometry import invert_transform, transform_points, unit
+from helio_optics.geometry import invert_transform, unit
 from helio_optics.rig_kinematics import Rig
-from helio_perception.ground_plane import marker_view_angle
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
@@ -375,27 +375,10 @@ def marker_view_poses(rig, camera, marker_side, points, count, distances=(0.10, 
     a build's error must not push a view past its 60 deg). Spread over the candidates (any
     prefix covers them), by the rig model's belief of where the marker is.
     """
-    T_robot_world = rig.parameters.T_robot_world
-    T_world_robot = invert_transform(T_robot_world)
-    corners = marker_corners(marker_side)
-    candidates = []
-    for px, py in points:
-        for tilt in tilts:
-            for azimuth in np.arange(azimuths) * 2.0 * math.pi / azimuths:
-                axis = tilted_axis(np.array([0.0, 0.0, -1.0]), math.radians(tilt), azimuth)
-                for distance in distances:
-                    centre = transform_points(T_robot_world, [px, py, 0.0]) + distance * axis
-                    for turn in wrist_turns:
-                        yaw, pitch = rig.yaw_pitch_for_axis(
-                            axis, math.atan2(centre[1], centre[0]) + turn)
-                        try:
-                            x = rig.inverse(centre, yaw, pitch)
-                        except ValueError:
-                            continue
-                        T_world_rgb = T_world_robot @ rig.forward(x).T_robot_rgb
-                        if marker_view_angle(T_world_rgb) <= max_view_angle and \
-                                in_view(camera, T_world_rgb, corners, margin):
-                            candidates.append(x)
+    candidates = [x for angle, x in marker_view_candidates(
+        rig, camera, marker_side, points, distances, tilts,
+        np.arange(azimuths) * 2.0 * math.pi / azimuths, wrist_turns, margin)
+        if angle <= max_view_angle]
     unique = []
     for x in candidates:
         if all(np.max(np.abs(x - y)) > 1e-6 for y in unique):

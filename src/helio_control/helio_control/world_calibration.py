@@ -111,34 +111,52 @@ def estimate_world_in_robot(T_robot_rgb, T_world_rgb, min_poses=3, outlier_dista
                             rejected=[int(i) for i in np.flatnonzero(~keep)])
 
 
+def marker_view_candidates(rig, camera, marker_side, points, distances, tilts, azimuths,
+                           wrist_turns=(0.0,), margin=30.0):
+    """
+    Yield (marker view angle [rad], joints) of each pose from which the camera sees the marker.
+
+    The lens stands each of `distances` [m] over each panel point of `points` (world x, y),
+    its axis tilted each of `tilts` [deg] off the vertical towards each of `azimuths` [rad],
+    the wrist turned by each of `wrist_turns` [rad] (the same axis reached with another
+    yaw); a pose counts when the rig model's kinematics put the marker's corners `margin`
+    [px] inside the image. The one candidate search of ``marker_poses`` (robot-world
+    calibration) and ``rig_calibration.marker_view_poses``.
+    """
+    T_robot_world = rig.parameters.T_robot_world
+    T_world_robot = invert_transform(T_robot_world)
+    corners = sun_sweep.marker_corners(marker_side)
+    for px, py in points:
+        for tilt in tilts:
+            for azimuth in azimuths:
+                axis = sun_sweep.tilted_axis(np.array([0.0, 0.0, -1.0]), math.radians(tilt),
+                                             azimuth)
+                for distance in distances:
+                    centre = transform_points(T_robot_world, [px, py, 0.0]) + distance * axis
+                    for turn in wrist_turns:
+                        yaw, pitch = rig.yaw_pitch_for_axis(
+                            axis, math.atan2(centre[1], centre[0]) + turn)
+                        try:
+                            x = rig.inverse(centre, yaw, pitch)
+                        except ValueError:
+                            continue
+                        T_world_rgb = T_world_robot @ rig.forward(x).T_robot_rgb
+                        if sun_sweep.in_view(camera, T_world_rgb, corners, margin):
+                            yield marker_view_angle(T_world_rgb), x
+
+
 def marker_poses(rig, camera, marker_side, points, distance=0.11, count=8, margin=30.0):
     """
     Return up to `count` joint vectors from which the RGB camera sees the whole marker.
 
     The lens stands `distance` [m] over panel `points` (world (x, y)), its axis tilted 0, 15
-    or 30 deg off the vertical towards 8 azimuths; a pose counts when the rig file's
-    kinematics put the marker's corners `margin` [px] inside the image. The marker's depth
-    is measured worst at a slant (up to 1.5 mm at 15 cm seen 40 deg off its normal, against
-    0.05 mm square on): the squarest views are kept, spread over the candidates.
+    or 30 deg off the vertical towards 8 azimuths (``marker_view_candidates``). The marker's
+    depth is measured worst at a slant (up to 1.5 mm at 15 cm seen 40 deg off its normal,
+    against 0.05 mm square on): the squarest views are kept, spread over the candidates.
     """
-    T_robot_world = rig.parameters.T_robot_world
-    T_world_robot = invert_transform(T_robot_world)
-    corners = sun_sweep.marker_corners(marker_side)
-    candidates = []
-    for px, py in points:
-        for tilt in (0.0, 15.0, 30.0):
-            for azimuth in range(0, 360, 45):
-                axis = sun_sweep.tilted_axis(np.array([0.0, 0.0, -1.0]), math.radians(tilt),
-                                             math.radians(azimuth))
-                centre = transform_points(T_robot_world, [px, py, 0.0]) + distance * axis
-                yaw, pitch = rig.yaw_pitch_for_axis(axis, math.atan2(centre[1], centre[0]))
-                try:
-                    x = rig.inverse(centre, yaw, pitch)
-                except ValueError:
-                    continue
-                T_world_rgb = T_world_robot @ rig.forward(x).T_robot_rgb
-                if sun_sweep.in_view(camera, T_world_rgb, corners, margin):
-                    candidates.append((marker_view_angle(T_world_rgb), x))
+    candidates = list(marker_view_candidates(
+        rig, camera, marker_side, points, (distance,), (0.0, 15.0, 30.0),
+        [math.radians(azimuth) for azimuth in range(0, 360, 45)], margin=margin))
     candidates.sort(key=lambda candidate: candidate[0])
     squarest = [x for _, x in candidates[:3 * count]]
     return sun_sweep.spread(squarest)[:count]
