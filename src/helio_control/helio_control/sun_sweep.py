@@ -34,15 +34,14 @@ from helio_control.lens_moves import focus_point
 from helio_optics.geometry import direction_from_angles, invert_transform, transform_points
 from helio_optics.geometry import unit
 from helio_optics.rig_kinematics import UnreachableError
+from helio_perception.ground_plane import marker_object_points
 import numpy as np
 from scipy.optimize import least_squares
 
 
 def marker_corners(marker_side):
     """Return the four corners (4, 3) of the marker's black square, world frame [m]."""
-    half = 0.5 * marker_side
-    return np.array([[-half, half, 0.0], [half, half, 0.0], [half, -half, 0.0],
-                     [-half, -half, 0.0]])
+    return marker_object_points(marker_side)
 
 
 def in_view(camera, T_world_camera, points, margin=30.0):

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 from helio_optics.geometry import invert_transform, transform_points
 from helio_perception.ground_plane import (
-    GroundMapping, MarkerConfig, MarkerDetector, MarkerPoseTracker)
+    GroundMapping, marker_object_points, MarkerConfig, MarkerDetector, MarkerPoseTracker)
 from helio_perception.spot_detection import (
     position_features, QUALITY_BLURRED, QUALITY_NONE, SpotConfig, SpotDetector, SpotFeatures,
     SpotResult, to_gray)
@@ -53,9 +53,7 @@ def marker_out_of_view(camera, T_world_camera, side, margin):
     """
     if margin < 0.0:
         return False
-    half = side * (0.5 + margin)
-    corners = np.array([[-half, -half, 0.0], [half, -half, 0.0], [half, half, 0.0],
-                        [-half, half, 0.0]])
+    corners = marker_object_points(side * (1.0 + 2.0 * margin))
     in_camera = transform_points(invert_transform(np.asarray(T_world_camera, dtype=float)),
                                  corners)
     if np.any(in_camera[:, 2] <= 1e-3):
