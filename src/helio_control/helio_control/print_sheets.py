@@ -32,7 +32,6 @@ class Sheet:
 
     image: np.ndarray
     dpi: int
-    pattern_box: tuple              # (column, row, width, height) of the pattern [px]
     scale_bar: tuple                # (column, row, length) of the 100 mm bar [px]
     text: list                      # the lines printed under the pattern
 
@@ -52,7 +51,7 @@ def _page(paper, dpi):
 
 
 def _scale_bar_and_text(page, dpi, top, lines):
-    """Draw the 100 mm bar with 10 mm ticks at row `top` and `lines` under it; return both."""
+    """Draw the 100 mm bar with 10 mm ticks at row `top` and `lines` under it; return the bar."""
     left = pixels(MARGIN + 0.01, dpi)
     length = pixels(SCALE_BAR, dpi)
     thick = max(2, pixels(0.0006, dpi))
@@ -73,7 +72,7 @@ def _scale_bar_and_text(page, dpi, top, lines):
         cv2.putText(page, line, (left, row), cv2.FONT_HERSHEY_SIMPLEX, 0.8 * scale, 0,
                     max(1, int(2 * scale)), cv2.LINE_AA)
         row += pixels(0.007, dpi)
-    return (left, top, length), lines
+    return left, top, length
 
 
 def marker_sheet(side=0.04, marker_id=0, dictionary='DICT_4X4_50', paper='a4', dpi=600):
@@ -98,8 +97,8 @@ def marker_sheet(side=0.04, marker_id=0, dictionary='DICT_4X4_50', paper='a4', d
              'Print at 100 % (not "fit to page"); check the bar with a ruler.',
              'Measure the black square; enter it as marker.side [m] in spot_detector.yaml',
              "(and the lens planner's marker_side). Matte paper, matte black: no gloss."]
-    bar, _ = _scale_bar_and_text(page, dpi, row + size + pixels(0.03, dpi), lines)
-    return Sheet(page, dpi, (column, row, size, size), bar, lines)
+    bar = _scale_bar_and_text(page, dpi, row + size + pixels(0.03, dpi), lines)
+    return Sheet(page, dpi, bar, lines)
 
 
 def board_sheet(squares=(7, 5), square=0.025, marker=0.018, dictionary='DICT_5X5_100',
@@ -131,8 +130,8 @@ def board_sheet(squares=(7, 5), square=0.025, marker=0.018, dictionary='DICT_5X5
              f'markers {marker * 1e3:.1f} mm',
              'Print at 100 % (not "fit to page"); check the bar with a ruler.',
              'Measure a square and a marker; lay the sheet flat on the panel.']
-    bar, _ = _scale_bar_and_text(page, dpi, row + height + pixels(0.025, dpi), lines)
-    return Sheet(page, dpi, (column, row, width, height), bar, lines)
+    bar = _scale_bar_and_text(page, dpi, row + height + pixels(0.025, dpi), lines)
+    return Sheet(page, dpi, bar, lines)
 
 
 def write_sheet(sheet, path):
