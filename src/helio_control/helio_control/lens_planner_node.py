@@ -997,10 +997,10 @@ class LensPlannerNode(Node):
                         self.get_logger().warning(f'azimuth guess {math.degrees(azimuth):.0f} '
                                                   f'deg: {error}')
                         continue
+                    up, around = (math.degrees(a) for a in sun_sweep.sun_angles(sun))
                     self.get_logger().info(
                         f'spot found with the azimuth guess {math.degrees(azimuth):.0f} deg: '
-                        f'a coarse sun {math.degrees(math.asin(-sun[2])):.2f} deg up, azimuth '
-                        f'{math.degrees(math.atan2(-sun[1], -sun[0])):.2f} deg (robot frame)')
+                        f'a coarse sun {up:.2f} deg up, azimuth {around:.2f} deg (robot frame)')
                     break
             if sun is None:
                 raise GoalFailed(f'the spot was not found at any of {len(candidates)} azimuth '

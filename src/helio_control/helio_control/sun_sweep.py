@@ -31,8 +31,8 @@ apart a set of poses casts the spots of two suns).
 import math
 
 from helio_control.lens_moves import focus_point
-from helio_optics.geometry import direction_from_angles, invert_transform, transform_points
-from helio_optics.geometry import unit
+from helio_optics.geometry import angles_from_direction, direction_from_angles
+from helio_optics.geometry import invert_transform, transform_points, unit
 from helio_optics.rig_kinematics import UnreachableError
 from helio_perception.ground_plane import marker_object_points
 import numpy as np
@@ -78,6 +78,12 @@ def in_view_many(camera, T_world_cameras, points, margin=30.0, tolerance=0.0):
 def sun_ray(elevation, azimuth_robot):
     """Return the unit sun ray s0 (the way light travels) in the robot frame."""
     return -direction_from_angles(0.5 * math.pi - elevation, azimuth_robot)
+
+
+def sun_angles(ray):
+    """Return (elevation, azimuth) [rad] of the sun ray `ray`: the inverse of `sun_ray`."""
+    polar, azimuth = angles_from_direction(-np.asarray(ray, dtype=float))
+    return 0.5 * math.pi - float(polar), float(azimuth)
 
 
 def in_lens_shadow(points_world, T_world_lens, sun_world, shadow_radius):
@@ -298,7 +304,7 @@ def coarse_sun(spot_model, T_robot_lens, spot_centres, plane_point, plane_normal
     for start in (chief, unit(chief - pose[0, :3, 2]), -pose[0, :3, 2]):
         if start[2] >= 0.0:
             continue
-        angles = np.array([math.asin(-start[2]), math.atan2(-start[1], -start[0])])
+        angles = np.array(sun_angles(start))
         if not np.all(np.abs(miss(angles)) < 1e3):
             continue
         fit = least_squares(miss, angles, bounds=([1e-3, -np.inf], [0.5 * math.pi, np.inf]),

@@ -9,7 +9,7 @@ import math
 
 from helio_control.sun_sweep import acquisition_poses, chief_ray_sun, coarse_sun, in_view
 from helio_control.sun_sweep import in_view_many, marker_corners
-from helio_control.sun_sweep import sees_marker_and_spot, spot_separation, sun_ray
+from helio_control.sun_sweep import sees_marker_and_spot, spot_separation, sun_angles, sun_ray
 from helio_control.sun_sweep import sweep_poses, tilted_axis, view_points
 from helio_optics.geometry import homogeneous, invert_transform, PinholeCamera
 from helio_optics.lens import LensParameters
@@ -187,3 +187,8 @@ def test_the_coarse_sun_of_one_pose_is_the_sun_that_casts_its_spot(rig):
     assert math.degrees(math.acos(float(chief @ sun_ray(math.radians(31.0), 0.0)))) > 2.0
     with pytest.raises(ValueError, match='above the lens'):
         coarse_sun(model, pose, [pose[:3, 3] + [0.0, 0.0, 0.01]], T[:3, 3], T[:3, 2])
+
+
+def test_sun_angles_invert_sun_ray():
+    for elevation, azimuth in ((0.3, 0.1), (1.2, 3.5), (0.9, 6.0)):
+        assert sun_angles(sun_ray(elevation, azimuth)) == pytest.approx((elevation, azimuth))
