@@ -239,16 +239,14 @@ def observations_of(frames, rig, T_robot_world, site, start, noise=None):
         return [], float('nan'), []
     seconds = [frames[k].seconds for k in used]
     reference = 0.5 * (min(seconds) + max(seconds))
-    point, normal = T_robot_world[:3, 3], T_robot_world[:3, 2]
     observations = []
     for k in used:
         frame = frames[k]
         offset = (0.0, 0.0) if site is None else angle_offsets(
             sun_position(site, start + datetime.timedelta(seconds=reference)),
             sun_position(site, start + datetime.timedelta(seconds=frame.seconds)))
-        observations.append(Observation(
-            transform_points(T_robot_world, frame.centre_world),
-            rig.forward(frame.joints).T_robot_lens, point, normal, OLD_SIGMA, offset))
+        observations.append(Observation.seen_on_the_world_plane(
+            rig, T_robot_world, frame.centre_world, frame.joints, OLD_SIGMA, offset))
     if noise is None:
         return observations, reference, [[k] for k in used]
     holds = merge_holds(observations, noise)

@@ -84,7 +84,8 @@ reason)], ambiguous, alternatives [Alternative], trustworthy).
 from dataclasses import dataclass, field
 import math
 
-from helio_optics.geometry import angles_from_direction, direction_from_angles, unit
+from helio_optics.geometry import angles_from_direction, direction_from_angles
+from helio_optics.geometry import transform_points, unit
 from helio_optics.spot import centres_in_optics, position_features, SpotModel
 import numpy as np
 from scipy.stats import chi2 as chi_square
@@ -148,6 +149,20 @@ class Observation:
         if not all(math.isfinite(v) for v in offset):
             raise ValueError(f'angle_offset must be finite, got {offset}')
         self.angle_offset = offset
+
+    @classmethod
+    def seen_on_the_world_plane(cls, rig, T_robot_world, centre_world, joints, sigma=0.5e-3,
+                                angle_offset=(0.0, 0.0)):
+        """
+        Return the observation of a spot centre seen on the world's plane (z = 0).
+
+        `centre_world` in the world frame, the lens where `rig` (a ``Rig``) puts it at the
+        reported `joints`, the plane and the centre taken to the robot frame by
+        `T_robot_world`: as ``sun_estimator`` builds its observations.
+        """
+        T = np.asarray(T_robot_world, dtype=float)
+        return cls(transform_points(T, centre_world), rig.forward(joints).T_robot_lens,
+                   T[:3, 3], T[:3, 2], sigma, angle_offset)
 
 
 @dataclass(frozen=True)

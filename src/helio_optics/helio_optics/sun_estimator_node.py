@@ -408,9 +408,8 @@ class SunEstimatorNode(Node):
         corrected = anchor is not None and all(b.sun is not None for b in buffered)
         T_world = self.rig.parameters.T_robot_world    # the present calibrations
         try:
-            observations = [Observation(
-                transform_points(T_world, b.centre), self.rig.forward(b.joints).T_robot_lens,
-                T_world[:3, 3], T_world[:3, 2], noise.sigma(),
+            observations = [Observation.seen_on_the_world_plane(
+                self.rig, T_world, b.centre, b.joints, noise.sigma(),
                 angle_offsets(anchor, b.sun) if corrected else (0.0, 0.0)) for b in buffered]
             holds = merge_holds(observations, noise)    # each sigma from its chief ray
             result = self.estimator.estimate([h.observation for h in holds], method=method,
