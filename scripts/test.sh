@@ -8,6 +8,8 @@
 #   test.sh system                  only test/
 #   test.sh -- --pytest-args -k x   arguments after -- go to `colcon test`
 # HELIO_TEST_TIMEOUT (s, default 1500) bounds the colcon test run and the system tests each.
+# HELIO_TEST_LANES (default 2): the package tests run in this many colcon runs at once, each
+# in its own DDS domain (ROS_DOMAIN_ID, +1, ...) and log base (log/test_lane_N).
 # Exit status: 0 only when at least one test ran and none failed or errored.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -42,15 +44,36 @@ system_results="build/system_tests"
     failed=0
     # A hung test fails the run instead of holding CI until its own limit.
     if [ ${#packages[@]} -gt 0 ]; then
-        timeout --kill-after=30 "${HELIO_TEST_TIMEOUT:-1500}" \
-            colcon test --event-handlers console_cohesion+ summary+ \
-            --packages-select "${packages[@]}" --pytest-args -p no:cacheprovider "$@" || {
-                code=$?
-                [ "$code" -ge 124 ] && echo "error: colcon test stopped after" \
-                    "${HELIO_TEST_TIMEOUT:-1500} s (HELIO_TEST_TIMEOUT)" >&2 \
-                    && echo "the package tests" >> "$report.stopped"
-                failed=1
-            }
+        # colcon tests the packages in their build order (optics before control), one lane
+        # of dependencies although no test needs another package's tests first: run them in
+        # HELIO_TEST_LANES lanes instead (default 2), each colcon with its own DDS domain and
+        # log base, the packages dealt out by their usual test time (scripts/test_lanes.py)
+        pids=()
+        lane=0
+        while read -r -a lane_packages; do
+            [ ${#lane_packages[@]} -gt 0 ] || continue
+            (
+                export ROS_DOMAIN_ID=$(( (ROS_DOMAIN_ID + lane) % 233 ))
+                timeout --kill-after=30 "${HELIO_TEST_TIMEOUT:-1500}" \
+                    colcon --log-base "log/test_lane_$lane" test \
+                    --event-handlers console_cohesion+ summary+ \
+                    --packages-select "${lane_packages[@]}" \
+                    --pytest-args -p no:cacheprovider "$@" || {
+                        code=$?
+                        [ "$code" -ge 124 ] && echo "error: colcon test stopped after" \
+                            "${HELIO_TEST_TIMEOUT:-1500} s (HELIO_TEST_TIMEOUT)" >&2 \
+                            && echo "the package tests (${lane_packages[*]})" \
+                            >> "$report.stopped"
+                        exit 1
+                    }
+            ) &
+            pids+=($!)
+            lane=$((lane + 1))
+        done < <(python3 "$root/scripts/test_lanes.py" "${HELIO_TEST_LANES:-2}" \
+                 "${packages[@]}")
+        for pid in "${pids[@]}"; do
+            wait "$pid" || failed=1
+        done
     fi
     if [ "$system" -eq 1 ]; then
         echo "[helio] system tests (test/): nodes of several packages together" >&2
