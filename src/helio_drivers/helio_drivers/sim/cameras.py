@@ -22,8 +22,13 @@ the spot (rendered alone, over its own image region); an unchanged scene costs o
 sensor stage.
 
 Thermal (FLIR Lepton 3.5 class): 160 x 120 pixels, each the panel surface temperature at the
-point its centre ray meets, plus Gaussian noise (NETD), read out capped at 180.9 degC
-(parameter), encoded 16UC1 in centikelvin.
+point its centre ray meets, plus Gaussian noise (NETD), through the camera's radiometric error
+(reading = T (1 + gain_error) + offset_error), read out between its floor and its cap (the
+paper's camera: 180.9 degC), encoded in centikelvin (16UC1, or mono16 as ``usb_cam``
+publishes a Lepton's Y16 stream). ``ThermalSettings.from_spec`` builds a datasheet's camera
+(``helio_optics.thermal_cameras``: the paper's, a Lepton 3.5 in high or low gain) with a
+radiometric error drawn within half its stated accuracy, and `FlatFieldCorrection` freezes its
+output as a Lepton's shutter does (issue 29).
 """
 
 from dataclasses import dataclass
@@ -89,10 +94,68 @@ class ThermalSettings:
     cap: float = 180.9              # read-out upper limit [degC] (paper Sec. IV-B)
     floor: float = -10.0            # read-out lower limit [degC]
     noise_sigma: float = 0.05       # NETD [K]
+    encoding: str = '16UC1'         # '16UC1' or 'mono16' (usb_cam's Y16), both centikelvin
+    offset_error: float = 0.0       # the camera's true radiometric offset [K]
+    gain_error: float = 0.0         # ... and gain error: T (1 + gain_error) + offset [-]
+    ffc_period: float = 0.0         # a flat-field correction every this [s sim] (0: none)
+    ffc_freeze_min: float = 0.3     # each freezes the output this long at least [s sim]
+    ffc_freeze_max: float = 1.0     # ... and at most [s sim]
 
     def camera(self):
         """Return the PinholeCamera of these settings."""
         return PinholeCamera.from_fov(self.width, self.height, self.horizontal_fov)
+
+    @classmethod
+    def from_spec(cls, spec, seed=0):
+        """
+        Return the settings of a camera of datasheet `spec` (a ThermalCameraSpec).
+
+        Its radiometric error is drawn from `seed`: an offset within half the stated
+        absolute accuracy and a gain error within half the relative one (a "typical"
+        accuracy holds for most units, not only at its bounds).
+        """
+        draw = np.random.default_rng(seed + 303).uniform(-0.5, 0.5, 2)
+        return cls(width=spec.width, height=spec.height, horizontal_fov=spec.horizontal_fov,
+                   cap=spec.cap, floor=spec.floor, noise_sigma=spec.netd,
+                   encoding=spec.encoding, offset_error=float(draw[0] * spec.accuracy_abs),
+                   gain_error=float(draw[1] * spec.accuracy_rel), ffc_period=spec.ffc_period,
+                   ffc_freeze_min=spec.ffc_freeze[0], ffc_freeze_max=spec.ffc_freeze[1])
+
+
+class FlatFieldCorrection:
+    """
+    When a thermal camera's output is frozen by its flat-field correction (simulated time).
+
+    The first correction comes after one `period` and the next one `period` after each
+    (a Lepton's automatic FFC: 3 minutes by default); each freezes the output for a time
+    drawn from `seed` between `shortest` and `longest`. A period of 0: never.
+    """
+
+    def __init__(self, period, shortest, longest, seed=0):
+        """Draw the freezes' lengths from `seed`; ValueError for a bad range."""
+        if period < 0.0 or not 0.0 <= shortest <= longest:
+            raise ValueError(f'flat-field correction: period {period} must be >= 0 and '
+                             f'0 <= shortest {shortest} <= longest {longest}')
+        if period > 0.0 and longest >= period:
+            raise ValueError(f'flat-field correction: a freeze of up to {longest} s every '
+                             f'{period} s leaves no frame')
+        self.period, self.shortest, self.longest = float(period), shortest, longest
+        self._rng = np.random.default_rng(seed + 707)
+        self._lengths = {}
+
+    def freeze_length(self, index):
+        """Return the length of the `index`-th freeze (1, 2, ...) [s]."""
+        while index not in self._lengths:
+            self._lengths[len(self._lengths) + 1] = float(
+                self._rng.uniform(self.shortest, self.longest))
+        return self._lengths[index]
+
+    def frozen(self, time):
+        """Return whether the output is frozen at `time` [s since the start]."""
+        if self.period <= 0.0 or time < self.period:
+            return False
+        index = int(time // self.period)
+        return time - index * self.period < self.freeze_length(index)
 
 
 def celsius_to_centikelvin(temperature):
@@ -125,10 +188,11 @@ class ThermalCamera:
         self._no_noise = np.zeros((self.camera.height, self.camera.width))
 
     def temperatures(self, panel, T_world_camera, rng=None):
-        """Return the read-out [degC] per pixel: the field at pixel centres, noise, cap."""
+        """Return the read-out [degC] per pixel: the field at pixel centres, error, noise, cap."""
         seen, sample, _ = self._seen(panel, T_world_camera)
         field = np.full(seen.shape, panel.wood.ambient)
         field[seen] = sample()
+        field = field * (1.0 + self.settings.gain_error) + self.settings.offset_error
         if self.settings.noise_sigma > 0.0:
             field += self.settings.noise_sigma * self._noise.draw(rng)
         return np.clip(field, self.settings.floor, self.settings.cap, out=field)
@@ -180,14 +244,15 @@ class ThermalCamera:
             bounds = np.array([panel.x_edges[0], panel.x_edges[-1], panel.y_edges[0],
                                panel.y_edges[-1]])
             thermal_counts_at(x, y, panel.x_centres, panel.y_centres, bounds, surface, far,
-                              ambient, noise, sigma, float(s.floor), float(s.cap), out)
+                              ambient, noise, sigma, float(s.floor), float(s.cap),
+                              float(s.gain_error), float(s.offset_error), out)
             return out
         _, sampler, position = self._seen(panel, T_world_camera)
         surface, far = sampler.surface()
         noise = self._noise.draw(rng) if noisy else self._no_noise
         thermal_counts(position, sampler.corner, sampler.columns, sampler.wx, sampler.wy,
                        sampler.inside, surface, far, ambient, noise, sigma, float(s.floor),
-                       float(s.cap), out)
+                       float(s.cap), float(s.gain_error), float(s.offset_error), out)
         return out
 
 

@@ -470,15 +470,20 @@ def _bilinear_rise(surface, k, columns, wx, wy):
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
-def _counts(value, noise, sigma, floor, cap):
-    """Return the read-out of `value` [degC]: + sigma noise, clipped, uint16 centikelvin."""
-    value = min(max(value + sigma * noise, floor), cap)
+def _counts(value, noise, sigma, floor, cap, gain, offset):
+    """
+    Return the read-out of `value` [degC] as uint16 centikelvin.
+
+    value (1 + gain) + offset (the camera's radiometric error), + sigma noise, clipped to
+    [floor, cap].
+    """
+    value = min(max(value * (1.0 + gain) + offset + sigma * noise, floor), cap)
     return np.uint16(min(max(np.rint((value + 273.15) * 100.0), 0.0), 65535.0))
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
 def thermal_counts(seen_position, corner, columns, wx, wy, inside, surface, far, ambient,
-                   noise, sigma, floor, cap, out):
+                   noise, sigma, floor, cap, gain, offset, out):
     """
     Fill `out` (H, W) uint16 centikelvin: the thermal read-out of the surface, in one pass.
 
@@ -500,7 +505,7 @@ def thermal_counts(seen_position, corner, columns, wx, wy, inside, surface, far,
                 else:
                     rise = far
                 value = ambient + rise
-            out[r, c] = _counts(value, noise[r, c], sigma, floor, cap)
+            out[r, c] = _counts(value, noise[r, c], sigma, floor, cap, gain, offset)
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
@@ -678,7 +683,7 @@ def _axis_weight(centres, value, hint):
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')
 def thermal_counts_at(x, y, x_centres, y_centres, bounds, surface, far, ambient, noise,
-                      sigma, floor, cap, out):
+                      sigma, floor, cap, gain, offset, out):
     """
     Fill `out` (H, W) uint16 as ``thermal_counts`` does, from each pixel's ground point.
 
@@ -704,7 +709,7 @@ def thermal_counts_at(x, y, x_centres, y_centres, bounds, surface, far, ambient,
                 else:
                     rise = far
                 value = ambient + rise
-            out[r, c] = _counts(value, noise[r, c], sigma, floor, cap)
+            out[r, c] = _counts(value, noise[r, c], sigma, floor, cap, gain, offset)
 
 
 @numba.njit(cache=True, nogil=True, error_model='numpy')

@@ -24,8 +24,8 @@ import os
 
 import cv2
 from helio_drivers.sim.build import BuiltRig, ideal_build
-from helio_drivers.sim.cameras import (light_window, RgbCamera, RgbSettings, ThermalCamera,
-                                       ThermalSettings)
+from helio_drivers.sim.cameras import (FlatFieldCorrection, light_window, RgbCamera, RgbSettings,
+                                       ThermalCamera, ThermalSettings)
 from helio_drivers.sim.clock import SimClock
 from helio_drivers.sim.flux import irradiance_on_cells, lens_pose_in_world, LensFlux
 from helio_drivers.sim.kernels import char_canvas
@@ -36,6 +36,7 @@ from helio_optics.geometry import invert_transform
 from helio_optics.lens import LensParameters
 from helio_optics.node_kit.process_tuning import keep_large_buffers
 from helio_optics.rig_kinematics import RigParameters
+from helio_optics.thermal_cameras import thermal_camera
 import numpy as np
 import yaml
 
@@ -74,6 +75,20 @@ class SimSettings:
     marker_print_reflectance: tuple = (0.05, 0.85)   # (ink, paper), linear [-]
     rgb: RgbSettings = field(default_factory=RgbSettings)
     thermal: ThermalSettings = field(default_factory=ThermalSettings)
+    # a datasheet's thermal camera (helio_optics.thermal_cameras: 'paper',
+    # 'lepton35_high_gain', 'lepton35_low_gain') in place of `thermal`; '': `thermal` as given
+    thermal_profile: str = ''
+    # the flat-field correction's period of either [s] (< 0: the camera's own): a test's
+    # freezes come every few seconds instead of every 3 minutes
+    thermal_ffc_period: float = -1.0
+
+    def thermal_settings(self):
+        """Return the thermal camera's settings: the profile's (its error from `seed`)."""
+        settings = self.thermal if not self.thermal_profile else ThermalSettings.from_spec(
+            thermal_camera(self.thermal_profile), self.seed)
+        if self.thermal_ffc_period >= 0.0:
+            settings = replace(settings, ffc_period=float(self.thermal_ffc_period))
+        return settings
 
     def start_datetime(self):
         """Return the start as an aware datetime (ValueError if the offset is missing)."""
@@ -203,10 +218,17 @@ class SimWorld:
         self.panel = WoodPanel(s.wood, s.grid, s.panel_extent)
         # the cameras' camera_info: the intrinsics the user's calibration gave (nominal);
         # the images are rendered with the build's true ones
-        self.published_cameras = {'rgb': s.rgb.camera(), 'thermal': s.thermal.camera()}
+        self.thermal_settings = s.thermal_settings()
+        self.published_cameras = {'rgb': s.rgb.camera(),
+                                  'thermal': self.thermal_settings.camera()}
         self.thermal = ThermalCamera(
-            s.thermal, seed=s.seed,
+            self.thermal_settings, seed=s.seed,
             camera=self.build.thermal_camera.true_camera(self.published_cameras['thermal']))
+        thermal = self.thermal_settings
+        self.flat_field = FlatFieldCorrection(thermal.ffc_period, thermal.ffc_freeze_min,
+                                              thermal.ffc_freeze_max, seed=s.seed)
+        self._last_thermal = None    # the last thermal image: repeated while frozen
+        self.thermal_stuck = False   # a hung camera: its last frame, until this is false
         self.rgb = RgbCamera(self.panel.extent, s.grid.fine_cell, s.rgb, s.marker_side,
                              s.marker_id, s.marker_dictionary, seed=s.seed,
                              print_reflectance=s.marker_print_reflectance,
@@ -368,13 +390,30 @@ class SimWorld:
         """Return the thermal camera's read-out [degC] (H, W) at its present pose."""
         _, T_world_thermal = self.camera_poses()
         camera = self.thermal if noise else ThermalCamera(
-            replace(self.settings.thermal, noise_sigma=0.0))
+            replace(self.thermal_settings, noise_sigma=0.0))
         return camera.temperatures(self.panel, T_world_thermal, self._rng)
 
     def thermal_image(self):
-        """Return the thermal image, 16UC1 centikelvin (H, W) uint16, with noise."""
+        """
+        Return the thermal image, centikelvin (H, W) uint16, with noise.
+
+        While a flat-field correction freezes the camera, or while it is stuck
+        (``thermal_stuck``), the last image again (the same array: a frozen output repeats
+        its last frame bit for bit).
+        """
+        last = self._last_thermal
+        if last is not None and (self.thermal_stuck or self.flat_field.frozen(self.time)):
+            return last
         _, T_world_thermal = self.camera_poses()
-        return self.thermal.image(self.panel, T_world_thermal, self._rng)
+        image = self.thermal.image(self.panel, T_world_thermal, self._rng)
+        # a live camera never repeats a frame bit for bit (a thermal monitor would take it
+        # for a frozen one): a still scene whose noise crop came up again (once in 4356
+        # frames of the noise bank) is read out again with another
+        while (last is not None and self.thermal.settings.noise_sigma > 0.0
+               and np.array_equal(image, last)):
+            image = self.thermal.image(self.panel, T_world_thermal, self._rng)
+        self._last_thermal = image
+        return image
 
     def rgb_image(self):
         """Return the RGB image (H, W, 3) uint8 at the camera's present pose."""

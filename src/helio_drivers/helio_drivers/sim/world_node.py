@@ -203,6 +203,22 @@ PARAMETER_DOCS = {
     'thermal.cap': ('thermal read-out upper limit [degC]', 0.0, 2000.0),
     'thermal.floor': ('thermal read-out lower limit [degC]', -273.0, 100.0),
     'thermal.noise_sigma': ('thermal noise (NETD) [K]', 0.0, 10.0),
+    'thermal.encoding': ("thermal image encoding, centikelvin: '16UC1' or 'mono16' (usb_cam's "
+                         'Y16)', None, None),
+    'thermal.offset_error': ("the thermal camera's true radiometric offset [K]", -100.0,
+                             100.0),
+    'thermal.gain_error': ("the thermal camera's true radiometric gain error: reading = "
+                           'T (1 + gain_error) + offset_error [-]', -0.5, 0.5),
+    'thermal.ffc_period': ('a flat-field correction freezes the thermal output every this '
+                           '(0: never) [s sim]', 0.0, 1e6),
+    'thermal.ffc_freeze_min': ('shortest flat-field freeze [s sim]', 0.0, 60.0),
+    'thermal.ffc_freeze_max': ('longest flat-field freeze [s sim]', 0.0, 60.0),
+    'thermal_profile': ("HIDDEN truth: a datasheet's thermal camera in place of thermal.* "
+                        "('paper', 'lepton35_high_gain', 'lepton35_low_gain'; its radiometric "
+                        "error drawn from seed; '': thermal.* as given)", None, None),
+    'thermal_ffc_period': ("the thermal camera's flat-field correction period, replacing its "
+                           "own (< 0: the camera's; tests: every few seconds) [s sim]", -1.0,
+                           1e6),
 }
 
 
@@ -210,7 +226,7 @@ class SimWorldNode(Node):
     """Thin node around SimWorld and SimDevices; see the module docstring."""
 
     # the parameters that can change at run time
-    RUNTIME = ('cloud_schedule', 'unplugged', 'real_time_factor')
+    RUNTIME = ('cloud_schedule', 'unplugged', 'real_time_factor', 'thermal_stuck')
     CAMERAS = ('rgb_camera', 'thermal_camera')   # `unplugged` names of the cameras
     RGB_FRAMES_IN_FLIGHT = 2     # on the RGB thread, at most (rgb_thread)
 
@@ -288,7 +304,8 @@ class SimWorldNode(Node):
         # camera_info holds the intrinsics the user's calibration gave, not the build's
         published = self.world.published_cameras
         self._rgb_topics = self._camera_topics('rgb', 'rgb8', published['rgb'])
-        self._thermal_topics = self._camera_topics('thermal', '16UC1', published['thermal'])
+        self._thermal_topics = self._camera_topics(
+            'thermal', self.world.thermal_settings.encoding, published['thermal'])
         self.canvas_pub = self.create_publisher(Image, 'sim/canvas', QoSProfile(depth=1))
         self.truth_sun_pub = self.create_publisher(Vector3Stamped, 'sim/truth/sun_direction',
                                                    TRUTH_QOS)
@@ -307,6 +324,11 @@ class SimWorldNode(Node):
             self, 'unplugged', [''],
             "Devices whose cable is out ('dobot', 'servo', 'rgb_camera', 'thermal_camera'); set "
             'at run time to unplug and plug back in.', dynamic=True))
+        self.world.thermal_stuck = declare(
+            self, 'thermal_stuck', False,
+            'The thermal camera hangs: it repeats its last frame (new stamps) until this is '
+            'false again; set at run time (a stuck camera must stop the heating).',
+            dynamic=True)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._next = {'rgb': 0.0, 'thermal': 0.0, 'canvas': 0.0, 'truth': 0.0}
         # published serialised, restamped: no message object per step
@@ -426,6 +448,11 @@ class SimWorldNode(Node):
                     self._pacer.set_real_time_factor(self.real_time_factor)
                 elif parameter.name == 'unplugged':
                     self._plug(parameter.value)
+                elif parameter.name == 'thermal_stuck':
+                    self.world.thermal_stuck = bool(parameter.value)
+                    self.get_logger().warning(
+                        f'thermal camera {"stuck" if parameter.value else "live again"} at '
+                        f'{self.world.time:.2f} s')
             except ValueError as error:
                 return SetParametersResult(successful=False, reason=str(error))
         return SetParametersResult(successful=True)
