@@ -17,6 +17,21 @@ reading more than `cap_margin` above the camera's read-out cap (a camera that ca
 180.9 degC cannot read 382 degC: a stuck or dead pixel, e.g. 65535 cK). Arrays of either
 byte order are read by value.
 
+N_p for any camera range (issue 29): a camera whose read-out cap lies below T_p (a FLIR
+Lepton 3.5 in high gain reads up to 140 degC) shows every pixel hotter than its cap at the
+cap, so N_p counts the pixels at or above ``min(T_p, cap)`` (`ThermalConfig.counting_level`):
+saturated pixels count, and the statistics' threshold is that level. The paper's rule (T_p =
+the cap) is the case where both are equal. A cap below ``min_visible`` (default 100 degC:
+below it the wood dries and does not char) cannot tell charring from warming, and is refused
+at start (`camera_range_report`). How large a dot a given N_p target burns then depends on
+the camera; the dot-size calibration (issue 29, item 3) measures it.
+
+A frozen frame (`FreezeDetector`): a radiometric camera's pixels always differ by their
+noise from one frame to the next, so a frame that repeats the last one bit for bit under a
+newer stamp is the camera holding its output (a Lepton's flat-field correction, 0.3-1 s
+every few minutes). A frame sent again under the same stamp (the simulated world's resend
+while it waits) is not a freeze: it keeps the last frame's verdict.
+
 Integer images are never converted as a whole: T_p becomes the smallest raw count whose
 temperature reaches it (evaluated with the same formula as the per-pixel conversion, so the
 count is exactly a direct count on converted pixels) and T_max comes from the raw maximum.
@@ -46,6 +61,52 @@ class ThermalConfig:
     mono16_gain: float = 0.01           # mono16 calibration: degC per count
     mono16_offset: float = -273.15      # mono16 calibration: degC at count 0
     cap_margin: float = 1.0             # readings more than this above the cap are not [K]
+    min_visible: float = 100.0          # a cap below this cannot see the charring [degC]
+
+    @property
+    def counting_level(self):
+        """Return the level N_p counts from: T_p, or the cap when the camera reads less."""
+        return min(self.threshold, self.camera_cap)
+
+
+def camera_range_report(config):
+    """
+    Return a warning (or '') about the camera's range for N_p; ValueError if it is useless.
+
+    A cap below ``min_visible`` saturates while the wood only warms: N_p would count the
+    warm area, not the charring. A cap below T_p counts the saturated pixels instead.
+    """
+    if config.camera_cap < config.min_visible:
+        raise ValueError(
+            f'the thermal camera reads only up to {config.camera_cap:g} degC (camera_cap), '
+            f'below {config.min_visible:g} degC (min_visible): it cannot tell charring wood '
+            'from warm wood. Use a camera mode with a wider range (a Lepton 3.5 in low gain '
+            'reads up to 400 degC; thermal_monitor camera_profile lepton35_low_gain)')
+    if config.camera_cap < config.threshold:
+        return (f'the thermal camera reads only up to {config.camera_cap:g} degC, below T_p '
+                f'{config.threshold:g} degC: N_p counts its saturated pixels (at or above '
+                f'{config.camera_cap:g} degC), so the dot an N_p target burns differs from the '
+                "paper's; calibrate the dot size for this camera")
+    return ''
+
+
+class FreezeDetector:
+    """Tell a frozen frame (the last one's pixels again under a newer stamp) from a live one."""
+
+    def __init__(self):
+        self._last = None            # (stamp, pixel bytes, verdict) of the last frame
+        self.frozen_frames = 0       # frozen frames seen [-]
+
+    def frozen(self, array, stamp):
+        """Return whether `array` (the decoded image) at `stamp` [s] is a frozen frame."""
+        pixels = np.ascontiguousarray(array).tobytes()
+        last = self._last
+        if last is not None and stamp == last[0]:
+            return last[2]           # the same frame sent again: its verdict stands
+        verdict = bool(last is not None and stamp > last[0] and pixels == last[1])
+        self._last = (stamp, pixels, verdict)
+        self.frozen_frames += verdict
+        return verdict
 
 
 @dataclass
@@ -57,7 +118,7 @@ class ThermalStatistics:
     hottest_u: int      # column [px]
     hottest_v: int      # row [px]
     saturated: bool
-    threshold: float    # [degC]
+    threshold: float    # the level N_p counts from: min(T_p, cap) [degC]
     camera_cap: float   # [degC]
     ignored: int = 0    # pixels that are no reading (non-finite, above the cap) [-]
     window_n_p: int = 0            # pixels >= threshold inside the window mask [-]
@@ -152,7 +213,7 @@ class ThermalAnalyzer:
             ignored = int(array.size - np.count_nonzero(valid))
             if ignored:
                 array = np.where(valid, array, -np.inf).astype(np.float32)
-            level = np.float32(config.threshold - THRESHOLD_ROUNDING)
+            level = np.float32(config.counting_level - THRESHOLD_ROUNDING)
         else:
             if array.dtype.kind not in 'ui' or array.dtype.itemsize != 2:
                 raise ValueError(f'{encoding} needs a 16-bit integer array, got '
@@ -160,7 +221,7 @@ class ThermalAnalyzer:
             array = array.astype(np.uint16, copy=False)   # native byte order, by value
             if encoding not in self._raw_thresholds:
                 self._raw_thresholds[encoding] = (
-                    raw_threshold(config.threshold, encoding, config),
+                    raw_threshold(config.counting_level, encoding, config),
                     raw_threshold(implausible, encoding, config) + 1)
             level, too_hot = self._raw_thresholds[encoding]
             above = array >= too_hot
@@ -184,7 +245,7 @@ class ThermalAnalyzer:
         return ThermalStatistics(
             t_max=t_max, n_p=n_p, hottest_u=int(u), hottest_v=int(v),
             saturated=bool(t_max >= config.camera_cap - config.saturation_tolerance),
-            threshold=config.threshold, camera_cap=config.camera_cap, ignored=ignored,
+            threshold=config.counting_level, camera_cap=config.camera_cap, ignored=ignored,
             window_n_p=window_n_p, window_t_max=window_t_max)
 
     def _celsius(self, reading, encoding):

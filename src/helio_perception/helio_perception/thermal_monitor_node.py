@@ -37,9 +37,11 @@ from helio_optics.node_kit.parameters import declare, declare_joint_lookup
 from helio_optics.node_kit.process_tuning import frozen_after_start_up
 from helio_optics.node_kit.qos import LATCHED, reliable
 from helio_optics.node_kit.runner import run_node
+from helio_optics.thermal_cameras import thermal_camera
 from helio_perception.frame_statistics import FrameStatistics, InputFreshness
 from helio_perception.ground_plane import GroundMapping
-from helio_perception.thermal import ThermalAnalyzer, ThermalConfig, window_mask
+from helio_perception.thermal import (camera_range_report, FreezeDetector, ThermalAnalyzer,
+                                      ThermalConfig, window_mask)
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -52,12 +54,25 @@ class ThermalMonitorNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('thermal_monitor', **kwargs)
+        profile = declare(
+            self, 'camera_profile', '',
+            "The thermal camera by its datasheet (helio_optics.thermal_cameras: 'paper', "
+            "'lepton35_high_gain', 'lepton35_low_gain'): sets camera_cap to its read-out cap; "
+            "'': camera_cap as given.")
+        camera_cap = declare(self, 'camera_cap', 180.9,
+                             'Read-out cap of the thermal camera [degC] (camera_profile, when '
+                             'set, replaces it).', -273.15, 2000.0)
+        if profile:
+            try:
+                camera_cap = thermal_camera(profile).cap
+            except ValueError as error:
+                raise ValueError(f'camera_profile: {error}') from None
         config = ThermalConfig(
             threshold=declare(self, 'threshold', 180.9,
                               'Pyrolysis threshold T_p for N_p [degC] (paper: the camera cap '
-                              '180.9).', -273.15, 2000.0),
-            camera_cap=declare(self, 'camera_cap', 180.9,
-                               'Read-out cap of the thermal camera [degC].', -273.15, 2000.0),
+                              '180.9); a camera that reads less counts its saturated pixels.',
+                              -273.15, 2000.0),
+            camera_cap=camera_cap,
             saturation_tolerance=declare(self, 'saturation_tolerance', 0.05,
                                          'T_max within this of the cap is saturated [K].',
                                          0.0, 100.0),
@@ -67,8 +82,20 @@ class ThermalMonitorNode(Node):
                                   'mono16 calibration: degC at count 0.', -1000.0, 1000.0),
             cap_margin=declare(self, 'cap_margin', 1.0,
                                'Readings more than this above camera_cap are no readings '
-                               '(stuck or dead pixels) and are ignored [K].', 0.0, 1000.0))
+                               '(stuck or dead pixels) and are ignored [K].', 0.0, 1000.0),
+            min_visible=declare(self, 'min_visible', 100.0,
+                                'A camera_cap below this cannot tell charring from warm wood: '
+                                'the node refuses to start [degC].', -273.15, 2000.0))
+        range_warning = camera_range_report(config)      # ValueError: refused at start
+        if range_warning:
+            self.get_logger().warning(range_warning)
         self.analyzer = ThermalAnalyzer(config)
+        self.detect_freezes = declare(
+            self, 'detect_freezes', True,
+            'Flag a frame that repeats the last one bit for bit under a newer stamp as frozen '
+            "(a Lepton's flat-field correction); needs a camera with noise, as every real "
+            'one has.')
+        self.freezes = FreezeDetector()
         self.locate_hottest = declare(
             self, 'locate_hottest_point', True,
             'Map the hottest pixel to the ground (needs /thermal/camera_info, /joint_states '
@@ -105,7 +132,8 @@ class ThermalMonitorNode(Node):
             self.create_timer(self.diagnostics_period, self.publish_diagnostics,
                               clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f'thermal_monitor: T_p {config.threshold} degC, cap '
-                               f'{config.camera_cap} degC')
+                               f'{config.camera_cap} degC; N_p counts from '
+                               f'{config.counting_level} degC')
 
     def on_joint_state(self, msg):
         """Merge a (partial) joint state into the buffer."""
@@ -156,6 +184,7 @@ class ThermalMonitorNode(Node):
                                    f'(non-finite, or above the {result.camera_cap:g} degC cap)',
                                    throttle_duration_sec=10.0)
         out = ThermalStats()
+        out.frozen = self.detect_freezes and self.freezes.frozen(image, stamp)
         out.header.stamp = msg.header.stamp
         out.header.frame_id = msg.header.frame_id or self.frame_id
         out.t_max, out.threshold, out.n_p = result.t_max, result.threshold, result.n_p
@@ -218,6 +247,7 @@ class ThermalMonitorNode(Node):
         node_age, wall_age = self.freshness.ages(node_now, wall_now)
         values['input_age_node_clock'], values['input_age_wall'] = node_age, wall_age
         values['pixels_ignored_last_frame'] = self.ignored_pixels
+        values['frozen_frames'] = self.freezes.frozen_frames
         warning = f'{self.ignored_pixels} pixel(s) of the last frame are no reading' \
             if self.ignored_pixels else ''
         level, message = self.stats.health(self.freshness.stale(node_now, wall_now), warning)

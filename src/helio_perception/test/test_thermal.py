@@ -5,6 +5,7 @@ import math
 from helio_optics.geometry import PinholeCamera
 from helio_optics.node_kit.conversions import image_to_numpy, numpy_to_image
 from helio_perception.ground_plane import GroundMapping
+from helio_perception.thermal import camera_range_report, FreezeDetector
 from helio_perception.thermal import raw_threshold, ThermalAnalyzer, ThermalConfig
 from helio_perception.thermal import window_mask
 import numpy as np
@@ -202,3 +203,49 @@ def test_n_p_in_the_window_leaves_out_the_previous_dots_afterglow():
     assert math.isnan(analyzer.statistics(raw, '16UC1').window_t_max)
     with pytest.raises(ValueError, match='window mask'):
         analyzer.statistics(raw, '16UC1', window[:-1])
+
+
+@pytest.mark.parametrize('seed, peak', [(0, 260.0), (1, 150.0), (2, 139.0)])
+def test_a_camera_capped_below_t_p_counts_its_saturated_pixels(seed, peak):
+    # issue 29: a Lepton 3.5 in high gain reads up to 140 degC; every hotter pixel reads 140
+    raw = lepton_frame(seed, peak)
+    true_celsius = raw / 100.0 - 273.15
+    high_gain = np.minimum(raw, 41315).astype(np.uint16)           # 140.00 degC
+    analyzer = ThermalAnalyzer(ThermalConfig(threshold=180.9, camera_cap=140.0))
+    stats = analyzer.statistics(high_gain, 'mono16')
+    # the direct count, on the true temperatures: the pixels at or above the cap
+    assert stats.n_p == int(np.sum(true_celsius >= 140.0))
+    assert stats.threshold == 140.0 and stats.camera_cap == 140.0
+    assert stats.saturated == (peak >= 140.0)
+    assert (stats.n_p > 0) == (peak >= 140.0)
+
+
+def test_the_papers_rule_is_the_case_where_the_cap_is_t_p():
+    raw = lepton_frame(0, 260.0)
+    config = ThermalConfig(threshold=180.9, camera_cap=180.9)
+    assert config.counting_level == 180.9
+    assert camera_range_report(config) == ''
+    wider = ThermalConfig(threshold=180.9, camera_cap=400.0)     # a low-gain Lepton
+    assert wider.counting_level == 180.9 and camera_range_report(wider) == ''
+    assert ThermalAnalyzer(config).statistics(raw, '16UC1').n_p == \
+        ThermalAnalyzer(wider).statistics(raw, '16UC1').n_p
+
+
+def test_a_camera_range_below_t_p_is_reported_and_one_that_cannot_see_charring_refused():
+    warning = camera_range_report(ThermalConfig(threshold=180.9, camera_cap=140.0))
+    assert '140' in warning and 'saturated' in warning
+    with pytest.raises(ValueError, match='low gain'):
+        camera_range_report(ThermalConfig(threshold=180.9, camera_cap=60.0))
+
+
+def test_a_frame_repeated_bit_for_bit_under_a_newer_stamp_is_frozen():
+    detector = FreezeDetector()
+    live = [lepton_frame(seed) for seed in range(3)]
+    assert not detector.frozen(live[0], 1.0)
+    assert not detector.frozen(live[1], 1.1)
+    assert detector.frozen(live[1].copy(), 1.2)          # the camera holds its output
+    assert detector.frozen(live[1].copy(), 1.2)          # sent again: the verdict stands
+    assert detector.frozen(live[1], 1.3)
+    assert not detector.frozen(live[2], 1.4)             # the shutter opens again
+    assert not detector.frozen(live[2].copy(), 1.4)      # a resend of a live frame is live
+    assert detector.frozen_frames == 2
