@@ -50,6 +50,7 @@ class Settings:
     thermal_rate: float = 8.7          # [Hz] sim_world's thermal_rate; a Lepton < 9
     rate_tolerance: float = 0.7        # measured rate below this share of expected: FAIL
     thermal_floor: float = -40.0       # [degC] a reading below this is a wrong calibration
+    pyrolysis: float = 180.9           # [degC] the paper's T_p (its camera's cap)
     timezone_tolerance: float = 3.0    # [h] local offset from longitude/15 before a WARN
     stamp_tolerance: float = 2.0       # [s] images and joint states stamped further apart fail
 
@@ -283,9 +284,12 @@ def check_thermal_range(stats, settings, window):
     """
     Return the finding of the thermal read-out: it can reach the pyrolysis threshold.
 
-    The thermal monitor counts N_p (pixels at or above its threshold T_p); a camera whose
-    read-out stops below T_p (a Lepton in high gain tops out near 140 degC) never counts a
-    charring dot. A reading below ``thermal_floor`` means a wrong radiometric conversion.
+    The thermal monitor counts N_p (pixels at or above its threshold T_p); a monitor whose
+    threshold lies above the camera's cap never counts a charring dot. Since issue 29 the
+    monitor counts from the cap when the camera reads less than T_p (a Lepton in high gain
+    tops out at 140 degC): its saturated pixels, which a dot-size calibration must relate to
+    the dots (a warning). A reading below ``thermal_floor`` means a wrong radiometric
+    conversion.
     """
     name = 'thermal range for charring'
     if not stats:
@@ -307,6 +311,13 @@ def check_thermal_range(stats, settings, window):
                        'check the radiometric conversion: thermal_monitor mono16.gain/offset '
                        '(a Lepton in TLinear: 0.01 K per count, offset -273.15) and the '
                        "camera's gain mode")
+    if last.camera_cap < settings.pyrolysis:
+        return Finding(name, WARN, f'the read-out stops at {last.camera_cap:g} degC, below the '
+                       f"paper's pyrolysis threshold {settings.pyrolysis:g} degC: N_p counts the "
+                       'saturated pixels, and the dot an N_p target burns differs from the '
+                       "paper's", "for dots of the paper's size, a camera mode reading past "
+                       '180.9 degC (a Lepton: low gain, thermal_monitor camera_profile '
+                       'lepton35_low_gain); else check the dot size with a test row')
     return Finding(name, OK, f'read-out up to {last.camera_cap:g} degC reaches the pyrolysis '
                    f'threshold {last.threshold:g} degC; T_max now {last.t_max:.1f} degC')
 

@@ -40,7 +40,10 @@ Beyond the paper:
   the start, and the result counts it); everything else ends the goal saying why. A window-rule
   frame without a camera pose is fresh data without a window reading: heat on while the image's
   N_p is below the target (the window lies in the image), else it counts towards
-  ``thermal_stale``;
+  ``thermal_stale``. A frozen frame (``ThermalStats.frozen``: a Lepton's flat-field
+  correction repeats its last frame for 0.3-1 s every few minutes) is no fresh reading either:
+  the dot heats on blind for at most ``thermal_freeze_max``, then it is a stale stream; a
+  stream that stops is stale after ``thermal_stale`` as before (issue 29);
 - **resume**: every finished dot is appended (and flushed) to the run's ``journal.jsonl``;
   the same goal sent again continues an unfinished run at its first unburnt dot, with the
   same plan, none lost and none doubled (``fresh`` starts over; ``start_index`` skips the
@@ -224,6 +227,11 @@ class PainterNode(Node):
             self, 'thermal_stale_wall', 2.0,
             'The same on the wall clock, so a stopped /clock cannot hold the lens [s].',
             0.1, 60.0)
+        self.thermal_freeze_max = declare(
+            self, 'thermal_freeze_max', 1.5,
+            'Frozen thermal frames (a flat-field correction: the last frame again) are no '
+            'fresh reading; heat on blind for at most this long (node clock), then treat the '
+            "stream as stale [s] (a Lepton's freezes last 0.3-1 s).", 0.0, 10.0)
         self.thermal_back_timeout = declare(
             self, 'thermal_back_timeout', 30.0,
             'After a stale thermal stream, wait at most this long (wall clock) for it to come '
@@ -285,6 +293,7 @@ class PainterNode(Node):
         self.world_calibrated = False
         self.faults = {}
         self._stats_waiters = []
+        self._live_stats_stamp = None   # the stamp of the last thermal frame not frozen [s]
         self._spot_waiters = []
         self._next_turn = NextTurn(self)
         self._busy = False
@@ -349,6 +358,8 @@ class PainterNode(Node):
 
     def _on_stats(self, message):
         self.stats, self.stats_wall = message, time.monotonic()
+        if not message.frozen:
+            self._live_stats_stamp = stamp_to_seconds(message.header.stamp)
         for waiter in list(self._stats_waiters):
             waiter.offer(message)
 
@@ -426,13 +437,20 @@ class PainterNode(Node):
 
     # ---- waits and moves ------------------------------------------------------------------
 
-    async def _next_stats(self):
-        """Return the next thermal statistics, or None when they are stale (watchdog)."""
+    async def _next_stats(self, stale_after=None):
+        """
+        Return the next thermal statistics, or None when they are stale (watchdog).
+
+        Stale after ``thermal_stale`` of the node clock, or `stale_after` [s] if sooner (the
+        rest of a frozen camera's ``thermal_freeze_max``), or ``thermal_stale_wall``.
+        """
         waiter = FirstOf()
         self._stats_waiters.append(waiter)
         # stale on the node clock only once the statistics queued meanwhile were taken
         node_timer = self.create_timer(
-            self.thermal_stale, lambda: self._next_turn.call(lambda: waiter.offer(None)))
+            self.thermal_stale if stale_after is None else min(self.thermal_stale,
+                                                               stale_after),
+            lambda: self._next_turn.call(lambda: waiter.offer(None)))
         wall_timer = self.create_timer(self.thermal_stale_wall, lambda: waiter.offer(None),
                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
         try:
@@ -895,12 +913,30 @@ class PainterNode(Node):
             decision = Decision.HEAT
             stale = ''                 # why the watchdog retreated, if it did
             blind_since = None         # window rule: since when the window had no figures
+            frozen = False             # the camera repeats its last frame
+            n_p, t_max = 0, 0.0        # the last reading (none yet)
             while decision is Decision.HEAT:
-                stats = await self._next_stats()
+                # a frozen camera (flat-field correction) holds its output: no reading, and
+                # no reason to fail the dot; blind for at most thermal_freeze_max from the
+                # last live frame, then a stale stream
+                budget = None
+                if frozen:
+                    live = self._live_stats_stamp
+                    budget = -1.0 if live is None else \
+                        live + self.thermal_freeze_max - self._now()
+                stats = None if budget is not None and budget <= 0.0 else \
+                    await self._next_stats(budget)
                 self._check()
                 if stats is None:
-                    stale = 'no thermal statistics'   # the watchdog: off the wood, below
+                    # the watchdog: off the wood, below
+                    stale = (f'the thermal camera frozen for more than '
+                             f'{self.thermal_freeze_max:g} s' if frozen
+                             else 'no thermal statistics')
                     break
+                frozen = stats.frozen
+                if frozen:
+                    decision = cycle.update_unread(self._now())      # max_heating only
+                    continue
                 if window and not stats.window_valid:
                     # no thermal camera pose for this image (joint states too far from its
                     # stamp): no window reading. The image is fresh, and the window lies in
@@ -964,6 +1000,8 @@ class PainterNode(Node):
             self._check()
             if stats is None:
                 break                  # retreated already: a stale stream ends the wait
+            if stats.frozen:
+                continue               # no reading (flat-field correction)
             n_p, t_max = _readings(stats, window)
             feedback.n_p, feedback.t_max = int(n_p), float(t_max)
             goal_handle.publish_feedback(feedback)
@@ -977,7 +1015,7 @@ class PainterNode(Node):
         while time.monotonic() < deadline:
             stats = await self._next_stats()
             self._check()
-            if stats is not None:
+            if stats is not None and not stats.frozen:
                 return
         raise PaintFailed(f'thermal statistics stale for more than {self.thermal_stale:g} s '
                           f'while heating dot {index}, and not back within '

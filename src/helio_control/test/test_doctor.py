@@ -132,10 +132,21 @@ def test_a_slow_camera_fails_and_frames_sent_again_count_once(tmp_path):
 
 def test_a_thermal_read_out_below_the_pyrolysis_threshold_fails(tmp_path):
     facts = healthy_facts(tmp_path)
-    facts.thermal = [ThermalFacts(25.0, 180.9, 140.0)]      # a Lepton in high gain
+    facts.thermal = [ThermalFacts(25.0, 180.9, 140.0)]      # a monitor counting above the cap
     result = finding(doctor.run_checks(facts), 'thermal range for charring')
     assert result.level == FAIL and 'stops at 140 degC' in result.finding
     assert 'low gain' in result.fix and 'camera_cap' in result.fix
+
+
+def test_a_camera_counted_at_its_cap_below_the_papers_t_p_is_a_warning(tmp_path):
+    # issue 29: the monitor counts a high-gain Lepton's saturated pixels (threshold = cap)
+    facts = healthy_facts(tmp_path)
+    facts.thermal = [ThermalFacts(25.0, 140.0, 140.0)]
+    result = finding(doctor.run_checks(facts), 'thermal range for charring')
+    assert result.level == WARN and 'saturated pixels' in result.finding
+    assert 'lepton35_low_gain' in result.fix
+    facts.thermal = [ThermalFacts(25.0, 180.9, 400.0)]      # a Lepton in low gain
+    assert finding(doctor.run_checks(facts), 'thermal range for charring').level == OK
 
 
 def test_thermal_readings_that_are_no_scene_fail(tmp_path):
