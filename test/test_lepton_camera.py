@@ -56,7 +56,7 @@ def tidy(rig):
 
 
 def test_dots_char_on_target_through_the_flat_field_freezes_without_a_retreat(rig):
-    targets = dots_along(0.08, 2)
+    targets = dots_along(0.08, 1)
     goal = PaintPattern.Goal(points=targets, fresh=True, run_dir=str(rig.runs / 'ffc'),
                              n_p_target=N_P_TARGET)
     handle = rig.graph.send_goal(rig.client, goal, None, 60.0)
@@ -66,8 +66,8 @@ def test_dots_char_on_target_through_the_flat_field_freezes_without_a_retreat(ri
     print(f'\nffc: {result.message}')
     assert result.success, result.message
     dots = read_journal(str(rig.runs / 'ffc' / 'journal.jsonl')).dots
-    assert [d.outcome for d in dots] == ['burnt', 'burnt']
-    assert [d.restarts for d in dots] == [0, 0], 'a freeze retreated the lens'
+    assert [d.outcome for d in dots] == ['burnt']
+    assert [d.restarts for d in dots] == [0], 'a freeze retreated the lens'
     heating = [(d.start, d.end) for d in dots]
     during = [m for m in rig.stats.messages
               if any(a <= stamp_to_seconds(m.header.stamp) <= b for a, b in heating)]
