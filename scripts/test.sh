@@ -10,6 +10,8 @@
 # HELIO_TEST_TIMEOUT (s, default 1500) bounds the colcon test run and the system tests each.
 # HELIO_TEST_LANES (default 2): the package tests run in this many colcon runs at once, each
 # in its own DDS domain (ROS_DOMAIN_ID, +1, ...) and log base (log/test_lane_N).
+# HELIO_SYSTEM_LANES (default 2): the system test modules likewise, in pytest runs at once
+# (domains ROS_DOMAIN_ID + 2, + 3, ...; results build/system_tests/pytest_N.xml).
 # Exit status: 0 only when at least one test ran and none failed or errored.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -78,16 +80,41 @@ system_results="build/system_tests"
     if [ "$system" -eq 1 ]; then
         echo "[helio] system tests (test/): nodes of several packages together" >&2
         mkdir -p "$system_results"
-        timeout --kill-after=30 "${HELIO_TEST_TIMEOUT:-1500}" \
-            python3 -m pytest "$root/test" -p no:cacheprovider -q \
-            --junitxml="$system_results/pytest.xml" -o junit_suite_name=system_tests \
-            >&2 || {
-                code=$?
-                [ "$code" -ge 124 ] && echo "error: the system tests stopped after" \
-                    "${HELIO_TEST_TIMEOUT:-1500} s (HELIO_TEST_TIMEOUT)" >&2 \
-                    && echo "the system tests" >> "$report.stopped"
-                failed=1
-            }
+        # each module starts graphs of its own (a graph uses about 1.5 of 2 cores, paced by
+        # its round trips): HELIO_SYSTEM_LANES (default 2) pytest runs at once, each in its
+        # own DDS domain, the modules dealt by their usual time; each lane's output is
+        # printed when it ends
+        pids=()
+        lane=0
+        while read -r -a lane_files; do
+            [ ${#lane_files[@]} -gt 0 ] || continue
+            echo "[helio] system lane $lane: ${lane_files[*]##*/}" >&2
+            (
+                export ROS_DOMAIN_ID=$(( (ROS_DOMAIN_ID + 2 + lane) % 233 ))
+                timeout --kill-after=30 "${HELIO_TEST_TIMEOUT:-1500}" \
+                    python3 -m pytest "${lane_files[@]}" -p no:cacheprovider -q \
+                    --junitxml="$system_results/pytest_$lane.xml" \
+                    -o junit_suite_name="system_tests_$lane" \
+                    > "$system_results/lane_$lane.log" 2>&1 || {
+                        code=$?
+                        [ "$code" -ge 124 ] && echo "error: the system tests (lane $lane)" \
+                            "stopped after ${HELIO_TEST_TIMEOUT:-1500} s" \
+                            "(HELIO_TEST_TIMEOUT)" >> "$system_results/lane_$lane.log" \
+                            && echo "the system tests (lane $lane)" >> "$report.stopped"
+                        echo "[helio] system lane $lane:" >&2
+                        cat "$system_results/lane_$lane.log" >&2
+                        exit 1
+                    }
+                echo "[helio] system lane $lane:" >&2
+                cat "$system_results/lane_$lane.log" >&2
+            ) &
+            pids+=($!)
+            lane=$((lane + 1))
+        done < <(python3 "$root/scripts/test_lanes.py" "${HELIO_SYSTEM_LANES:-2}" \
+                 "$root"/test/test_*.py)
+        for pid in "${pids[@]}"; do
+            wait "$pid" || failed=1
+        done
     fi
     exit "$failed"
 ) 9>"$root/.helio.lock" || status=$?

@@ -38,12 +38,20 @@ def best_longest_lane(packages, count):
 
 @pytest.mark.parametrize('count', [1, 2, 3])
 def test_every_package_lands_in_exactly_one_lane_near_the_best_split(count):
-    packages = sorted(WEIGHTS) + ['a_new_package']
+    packages = sorted(name for name in WEIGHTS if name.startswith('helio_')) + ['a_new']
     lanes = test_lanes.lanes_of(packages, count)
     dealt = [package for lane in lanes for package in lane]
     assert sorted(dealt) == sorted(packages)
     assert len(lanes) == min(count, len(packages))
     assert longest_lane(lanes) <= 4 / 3 * best_longest_lane(packages, count)
+
+
+def test_test_files_are_weighed_by_their_module_name():
+    assert test_lanes.weight('/any/where/test/test_painter.py') == WEIGHTS['test_painter']
+    assert test_lanes.weight('test_never_measured.py') == 1
+    lanes = test_lanes.lanes_of(['test/test_painter.py', 'test/test_painter_safety.py',
+                                 'test/test_doctor.py'], 2)
+    assert sorted(map(len, lanes)) == [1, 2]
 
 
 def test_the_command_prints_one_lane_per_line_and_refuses_a_bad_count():
