@@ -10,8 +10,9 @@
 # HELIO_TEST_TIMEOUT (s, default 1500) bounds the colcon test run and the system tests each.
 # HELIO_TEST_LANES (default 2): the package tests run in this many colcon runs at once, each
 # in its own DDS domain (ROS_DOMAIN_ID, +1, ...) and log base (log/test_lane_N).
-# HELIO_SYSTEM_LANES (default 2): the system test modules likewise, in pytest runs at once
-# (domains ROS_DOMAIN_ID + 2, + 3, ...; results build/system_tests/pytest_N.xml).
+# HELIO_SYSTEM_LANES (default 1): the system test modules likewise, in pytest runs at once
+# (domains ROS_DOMAIN_ID + 2, + 3, ...; results build/system_tests/pytest_N.xml); on 2 cores
+# more lanes gain nothing (the graphs are CPU-bound).
 # Exit status: 0 only when at least one test ran and none failed or errored.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -80,37 +81,44 @@ system_results="build/system_tests"
     if [ "$system" -eq 1 ]; then
         echo "[helio] system tests (test/): nodes of several packages together" >&2
         mkdir -p "$system_results"
-        # each module starts graphs of its own (a graph uses about 1.5 of 2 cores, paced by
-        # its round trips): HELIO_SYSTEM_LANES (default 2) pytest runs at once, each in its
-        # own DDS domain, the modules dealt by their usual time; each lane's output is
-        # printed when it ends
+        # HELIO_SYSTEM_LANES (default 1) pytest runs at once, each in its own DDS domain, the
+        # modules dealt by their usual time; with more than one, each lane's output is
+        # printed when it ends. On 2 cores two lanes gained nothing (a fresh clone: 952 and
+        # 978 s against 980 s in one lane): the graphs are CPU-bound, each module took
+        # 2.2-2.5x as long beside the other; on more cores they may
         pids=()
         lane=0
+        lanes="${HELIO_SYSTEM_LANES:-1}"
         while read -r -a lane_files; do
             [ ${#lane_files[@]} -gt 0 ] || continue
-            echo "[helio] system lane $lane: ${lane_files[*]##*/}" >&2
+            [ "$lanes" -gt 1 ] && echo "[helio] system lane $lane: ${lane_files[*]##*/}" >&2
             (
                 export ROS_DOMAIN_ID=$(( (ROS_DOMAIN_ID + 2 + lane) % 233 ))
+                log="$system_results/lane_$lane.log"
+                # one lane: its output as it comes; more: each printed when it ends
                 timeout --kill-after=30 "${HELIO_TEST_TIMEOUT:-1500}" \
                     python3 -m pytest "${lane_files[@]}" -p no:cacheprovider -q \
                     --junitxml="$system_results/pytest_$lane.xml" \
-                    -o junit_suite_name="system_tests_$lane" \
-                    > "$system_results/lane_$lane.log" 2>&1 || {
+                    -o junit_suite_name="system_tests_$lane" 2>&1 \
+                    | if [ "$lanes" -gt 1 ]; then cat > "$log"; else tee "$log" >&2; fi \
+                    || {
                         code=$?
                         [ "$code" -ge 124 ] && echo "error: the system tests (lane $lane)" \
                             "stopped after ${HELIO_TEST_TIMEOUT:-1500} s" \
-                            "(HELIO_TEST_TIMEOUT)" >> "$system_results/lane_$lane.log" \
+                            "(HELIO_TEST_TIMEOUT)" | tee -a "$log" >&2 \
                             && echo "the system tests (lane $lane)" >> "$report.stopped"
-                        echo "[helio] system lane $lane:" >&2
-                        cat "$system_results/lane_$lane.log" >&2
+                        [ "$lanes" -gt 1 ] && echo "[helio] system lane $lane:" >&2 \
+                            && cat "$log" >&2
                         exit 1
                     }
-                echo "[helio] system lane $lane:" >&2
-                cat "$system_results/lane_$lane.log" >&2
+                if [ "$lanes" -gt 1 ]; then
+                    echo "[helio] system lane $lane:" >&2
+                    cat "$log" >&2
+                fi
             ) &
             pids+=($!)
             lane=$((lane + 1))
-        done < <(python3 "$root/scripts/test_lanes.py" "${HELIO_SYSTEM_LANES:-2}" \
+        done < <(python3 "$root/scripts/test_lanes.py" "$lanes" \
                  "$root"/test/test_*.py)
         for pid in "${pids[@]}"; do
             wait "$pid" || failed=1
