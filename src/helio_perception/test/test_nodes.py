@@ -266,6 +266,38 @@ def node_status(graph, name):
         arrays
 
 
+def test_thermal_monitor_counts_a_high_gain_leptons_saturated_pixels_and_flags_a_freeze(graph):
+    # issue 29: camera_profile gives the datasheet's cap; a frame repeated under a newer
+    # stamp (flat-field correction) is flagged frozen, the same frame sent again is not
+    node = graph.add(ThermalMonitorNode(**graph.node_options(
+        camera_profile='lepton35_high_gain', locate_hottest_point=False)))
+    received = graph.collect(ThermalStats, 'thermal/stats')
+    feed = Feeder(graph, 'thermal')
+    raw = np.full((120, 160), 29815, np.uint16)            # 25 degC
+    raw[50:53, 70:74] = 41315                              # 12 pixels at the 140 degC cap
+    rng = np.random.default_rng(1)
+    verdicts = []
+    for stamp, frame in ((1.0, raw + rng.integers(0, 3, raw.shape).astype(np.uint16)),
+                         (1.1, None), (1.1, None), (1.2, raw)):
+        if frame is not None:
+            image = np.minimum(frame, 41315).astype(np.uint16)
+        msg = numpy_to_image(image, 'mono16')
+        msg.header.stamp = stamp_from_seconds(stamp)
+        feed.images.publish(msg)
+        stats = received.wait_for_count(len(verdicts) + 1)[-1]
+        verdicts.append(stats.frozen)
+    assert stats.camera_cap == 140.0 and stats.threshold == 140.0 and stats.n_p == 12
+    assert verdicts == [False, True, True, False]
+    assert node.freezes.frozen_frames == 1
+
+
+def test_thermal_monitor_refuses_a_camera_that_cannot_see_charring(graph):
+    with pytest.raises(ValueError, match='low gain'):
+        ThermalMonitorNode(**graph.node_options(camera_cap=60.0))
+    with pytest.raises(ValueError, match='camera_profile'):
+        ThermalMonitorNode(**graph.node_options(camera_profile='lepton2'))
+
+
 def test_thermal_monitor_reports_its_input_stopped_with_the_clock(graph):
     """Issue 17 item 8: the world dies, /clock stops: the node must not look normal."""
     node = graph.add(ThermalMonitorNode(**graph.node_options(
