@@ -22,6 +22,8 @@ import datetime
 import math
 import os
 
+from helio_optics.thermal_cameras import PAPER
+
 OK, WARN, FAIL = 'OK', 'WARN', 'FAIL'
 LEVELS = (OK, WARN, FAIL)
 # The calibrations the lens planner reads back at start (calibration_store, issue 30 item 4)
@@ -50,7 +52,7 @@ class Settings:
     thermal_rate: float = 8.7          # [Hz] sim_world's thermal_rate; a Lepton < 9
     rate_tolerance: float = 0.7        # measured rate below this share of expected: FAIL
     thermal_floor: float = -40.0       # [degC] a reading below this is a wrong calibration
-    pyrolysis: float = 180.9           # [degC] the paper's T_p (its camera's cap)
+    pyrolysis: float = PAPER.cap       # [degC] the paper's T_p (its camera's cap)
     timezone_tolerance: float = 3.0    # [h] local offset from longitude/15 before a WARN
     stamp_tolerance: float = 2.0       # [s] images and joint states stamped further apart fail
 
@@ -316,8 +318,9 @@ def check_thermal_range(stats, settings, window):
                        f"paper's pyrolysis threshold {settings.pyrolysis:g} degC: N_p counts the "
                        'saturated pixels, and the dot an N_p target burns differs from the '
                        "paper's", "for dots of the paper's size, a camera mode reading past "
-                       '180.9 degC (a Lepton: low gain, thermal_monitor camera_profile '
-                       'lepton35_low_gain); else check the dot size with a test row')
+                       f'{settings.pyrolysis:g} degC (a Lepton: low gain, thermal_monitor '
+                       'camera_profile lepton35_low_gain); else check the dot size with a test '
+                       'row')
     return Finding(name, OK, f'read-out up to {last.camera_cap:g} degC reaches the pyrolysis '
                    f'threshold {last.threshold:g} degC; T_max now {last.t_max:.1f} degC')
 
