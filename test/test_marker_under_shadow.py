@@ -12,11 +12,12 @@ detector's global shadow levels rely on.
 The frames: the focus put 3-5 cm from the marker's centre, outside its paper sheet, with the
 lens 6-16 cm above the panel, in the world's sun. Kept are the frames whose shadow, as the
 world casts it, covers part of the marker's black outline and not all of it, with the whole
-marker in view and seen within 55 deg of its normal (the detector refuses more slanted views
-on purpose). The truth is the world's camera pose; "the marker's pose" is the marker in the
-camera frame (its position and rotation). A wrong pose is one more than 1 mm or 1 deg off:
-a shadow edge taken for a marker edge put the pose 2-8 mm and 1-4 deg off in this
-experiment.
+marker in view, at whatever angle (the detector refuses views more than 60 deg off the
+marker's normal on purpose; such frames count as misses). The truth is the world's camera
+pose; "the marker's pose" is the marker in the camera frame (its position and rotation). A
+wrong pose is one more than 1 mm or 1 deg off: a shadow edge taken for a marker edge put the
+pose 2-8 mm and 1-4 deg off in this experiment, while four corners seen without any shadow
+leave up to about 0.9 deg of rotation in a few frames (docs/measurements/2026-11-28-session-44.md).
 """
 
 from dataclasses import replace
@@ -31,7 +32,6 @@ import numpy as np
 import pytest
 
 SHEET_HALF = 0.026      # the marker's black square (20 mm) plus its 6 mm quiet zone [m]
-MAX_VIEW_DEG = 55.0
 
 
 def outline(side, per_edge=16):
@@ -74,9 +74,7 @@ def shaded_marker_frames(settings, count, seed):
         T_world_camera = world.camera_poses()[0]
         pixels = camera.project(transform_points(invert_transform(T_world_camera), edge))
         inside = np.all((pixels > 5) & (pixels < np.array([camera.width, camera.height]) - 5))
-        position = T_world_camera[:3, 3]
-        view = math.degrees(math.atan2(math.hypot(*position[:2]), position[2]))
-        if 0.05 <= shaded <= 0.95 and inside and view <= MAX_VIEW_DEG:
+        if 0.05 <= shaded <= 0.95 and inside:
             found += 1
             yield world.rgb_image(), T_world_camera, camera
     raise AssertionError(f'only {found} of {count} frames with the shadow across the marker')
@@ -110,7 +108,7 @@ LIGHTS = [('webcam_exposure', 0.55, 0.12),
 @pytest.mark.parametrize('name, exposure, sky', LIGHTS, ids=[light[0] for light in LIGHTS])
 def test_the_marker_is_found_under_the_lens_shadow(name, exposure, sky):
     settings = SimSettings(rgb=replace(RgbSettings(), exposure=exposure, diffuse_fraction=sky))
-    frames = list(shaded_marker_frames(settings, 40, seed=35))
+    frames = list(shaded_marker_frames(settings, 100, seed=35))
     found, errors, reasons = detect_all(frames, MarkerDetector())
     within = sum(mm <= 0.3 and deg <= 0.3 for mm, deg in errors)
     worst = max(errors, key=lambda error: error[0] / 0.3 + error[1] / 0.3)
