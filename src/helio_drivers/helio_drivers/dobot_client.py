@@ -104,6 +104,11 @@ class DobotClient(SerialClient):
         """Count the replies dropped for a bad checksum since creation."""
         return self._reader.checksum_errors
 
+    @property
+    def skipped_bytes(self):
+        """Count the bytes skipped as no frame's (line noise, cut frames) since creation."""
+        return self._reader.skipped_bytes
+
     def _on_open(self):
         self._reader.reset()
         self._last_queue_index = 0      # a device reopened may have restarted its queue

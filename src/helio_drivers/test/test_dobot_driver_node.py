@@ -14,6 +14,7 @@ from helio_msgs.action import MoveArm
 from helio_optics.arm_kinematics import DobotArm
 from helio_optics.node_kit.in_process_graph import InProcessGraph
 from node_harness import ClockPublisher, driver_on, DriverGraph
+import numpy as np
 import pytest
 from std_srvs.srv import Trigger
 
@@ -407,3 +408,28 @@ def test_pose_replies_no_dobot_can_send_are_dropped_and_said_on_the_status(graph
     for message in graph.joint_states.messages[heard:]:
         assert list(message.position) == pytest.approx([0.1, 0.4, 0.3, 0.0], abs=1e-4)
     assert graph.driver.client.impossible_replies == 3
+
+
+def test_noise_on_the_line_never_puts_an_impossible_joint_on_joint_states(graph):
+    # issue 35: random bytes before a fifth of the replies while the arm is held and while it
+    # moves; the frames' header and checksum and the pose range check leave every published
+    # joint the held one, or between the move's start and its target
+    emulator, graph = graph
+    start, target = (0.1, 0.4, 0.3, 0.0), (-0.3, 0.6, 0.2, 0.5)
+    assert graph.move(MoveArm.Goal.MOVJ_ANGLE, start).result.success
+    heard = len(graph.joint_states.messages)
+    emulator.inject(garbage_rate=0.2)
+    graph.joint_states.wait_for_count(heard + 40, 20.0)
+    held = graph.joint_states.messages[heard:]
+    moved = graph.move(MoveArm.Goal.MOVJ_ANGLE, target)
+    emulator.clear_faults()
+    assert moved.result.success, moved.result.message
+    for message in held:
+        assert list(message.position) == pytest.approx(start, abs=1e-4), message
+    low, high = np.minimum(start, target) - 1e-4, np.maximum(start, target) + 1e-4
+    moving = graph.joint_states.messages[heard + len(held):]
+    for message in moving:
+        assert np.all((low <= message.position) & (message.position <= high)), message
+    print(f'\n{len(held)} held and {len(moving)} moving joint states, '
+          f'{graph.driver.client.skipped_bytes} bytes of noise skipped')
+    assert graph.driver.client.skipped_bytes > 0     # the noise reached the driver
