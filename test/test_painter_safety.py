@@ -365,6 +365,27 @@ def test_an_unplugged_dobot_puts_the_focus_off_the_wood_within_half_a_second(rig
                           "the Dobot's joint states again")
 
 
+def test_an_unplugged_maestro_puts_the_focus_off_the_wood_within_half_a_second(rig):
+    # issue 35: the wrist's device falls silent mid-dot (its pty closes as on a USB unplug);
+    # the lens planner's retreat would move the wrist too, so the arm alone lifts the lens
+    def unplug(_handle):
+        rig.set_world(unplugged=['servo'])
+        return rig.now()
+
+    try:
+        delay, handle = painting_interrupted(rig, 'unplug_maestro', 0.09, unplug, x=0.06)
+        result = rig.graph.goal_result(handle, TIMEOUT).result
+    finally:
+        rig.set_world(unplugged=[''])
+    print(f'unplugged maestro: {result.message}')
+    assert delay <= OFF_BOUND
+    assert not result.success and 'servo' in result.message
+    assert 'the arm lifted the lens' in result.message
+    heard = len(rig.joints.messages)
+    rig.joints.wait_until(lambda m: any('lens_yaw' in j.name for j in m[heard:]), 60.0,
+                          "the wrist's joint states again")
+
+
 def test_a_cancel_puts_the_focus_off_the_wood_within_half_a_second(rig):
     def cancel(handle):
         since = rig.now()
