@@ -29,7 +29,7 @@ from helio_control.bringup import SIMULATED_DEVICE_REPLY_TIMEOUT, SIMULATED_SILE
 from helio_control.calibration_store import rig_description, save_calibration
 from helio_drivers import dobot_protocol as proto
 from helio_drivers.dobot_emulator import DobotEmulator
-from helio_msgs.action import MoveArm, MoveWrist
+from helio_msgs.action import FocusLens, MoveArm, MoveWrist
 from helio_msgs.msg import DeviceStatus, SpotObservation, ThermalStats
 from helio_optics.config_files import config_path
 from helio_optics.node_kit.deployment import rig_file_or_default
@@ -95,6 +95,19 @@ class Doctor:
         assert arm.result.success and wrist.result.success, (arm.result.message,
                                                              wrist.result.message)
 
+    def wait_for_the_rig(self):
+        """
+        Wait until every rig node is up: perception publishing, the lens planner serving.
+
+        `helio rig` starts the six nodes at once; their imports and warm-ups take both cores
+        for seconds, and the emulated devices answer from a thread of the world's process in
+        wall time: a first move sent into that start, beside two busy processes, found the
+        emulated Maestro silent past the simulated graph's silence limit (session 43).
+        """
+        self.spots.wait_for_count(1, TIMEOUT)
+        self.thermal.wait_for_count(1, TIMEOUT)
+        self.graph.action_client(FocusLens, 'focus', TIMEOUT)
+
     def look_at_marker(self):
         """Put the lens level 8.2 cm over a point beside the marker: the camera sees it."""
         above = self.rig.parameters.T_robot_world @ [0.01, 0.01, 0.082, 1.0]
@@ -157,6 +170,7 @@ def rig(tmp_path_factory):
         try:
             wait_for_devices(graph, TIMEOUT)
             doctor = Doctor(group, graph, tmp)
+            doctor.wait_for_the_rig()
             doctor.look_at_marker()
             yield doctor
         finally:
