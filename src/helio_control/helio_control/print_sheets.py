@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import os
 
 import cv2
+from helio_optics.calibration_board import BoardSpec
 from helio_optics.ground_render import aruco_dictionary
 import numpy as np
 
@@ -109,20 +110,15 @@ def board_sheet(squares=(7, 5), square=0.025, marker=0.018, dictionary='DICT_5X5
     `squares` (columns, rows) of `square` [m], markers `marker` [m] of `dictionary` (not the
     ground marker's, so that neither is taken for the other).
     """
-    columns, rows = (int(v) for v in squares)
-    if columns < 3 or rows < 3:
-        raise ValueError(f'a ChArUco board needs at least 3 x 3 squares, not {columns} x {rows}')
-    if not 0.0 < marker < square:
-        raise ValueError(f'the marker ({marker * 1e3:.1f} mm) must be smaller than the square '
-                         f'({square * 1e3:.1f} mm)')
+    spec = BoardSpec(squares, square, marker, dictionary)      # ValueError for a bad board
+    columns, rows = spec.squares
     page = _page(paper, dpi)
     width, height = pixels(columns * square, dpi), pixels(rows * square, dpi)
     if width > page.shape[1] - 2 * pixels(MARGIN, dpi) or \
             height > 0.7 * page.shape[0]:
         raise ValueError(f'a {columns} x {rows} board of {square * 1e3:.1f} mm squares does '
                          f'not fit the {paper} page')
-    board = cv2.aruco.CharucoBoard((columns, rows), square, marker, aruco_dictionary(dictionary))
-    image = board.generateImage((width, height), marginSize=0, borderBits=1)
+    image = spec.board().generateImage((width, height), marginSize=0, borderBits=1)
     column = (page.shape[1] - width) // 2
     row = pixels(MARGIN + 0.01, dpi)
     page[row:row + height, column:column + width] = image

@@ -1,5 +1,7 @@
 """The kit's parameter declaration on a real rclpy node (private Context): ranges, read-only."""
 
+import math
+
 from helio_optics.node_kit.parameters import declare, parameter_descriptor
 from helio_optics.node_kit.parameters import unit_naming_problem
 import pytest
@@ -127,6 +129,26 @@ def test_a_start_up_parameter_is_read_only_and_a_dynamic_one_is_not(make_node):
     assert not refused.successful and 'read-only' in refused.reason.lower()
     assert node.get_parameter('rate').value == 10.0
     assert node.set_parameters([Parameter('gain', value=1.0)])[0].successful
+
+
+@pytest.mark.parametrize('value', [math.nan, math.inf, -math.inf])
+def test_non_finite_numbers_are_refused_at_start_and_at_run_time_by_name(make_node, value):
+    # issue 35: rclpy's range check lets NaN through (it compares false with both bounds),
+    # and a parameter without a range takes any float
+    node = make_node([Parameter('gain', value=value)])
+    with pytest.raises((ValueError, InvalidParameterValueException), match='gain'):
+        declare(node, 'gain', 0.9, 'a gain [-]', 0.01, 2.0)
+    node = make_node([Parameter('offsets', value=[0.0, value])])
+    with pytest.raises(ValueError, match='offsets must be a finite number'):
+        declare(node, 'offsets', [0.0, 0.0], 'offsets [m]')
+    node = make_node()
+    assert declare(node, 'bias', 0.0, 'a bias without a range [m]', dynamic=True) == 0.0
+    assert declare(node, 'gain', 0.9, 'a gain [-]', 0.01, 2.0, dynamic=True) == 0.9
+    for name in ('bias', 'gain'):
+        refused = node.set_parameters([Parameter(name, value=value)])[0]
+        assert not refused.successful and name in refused.reason, refused.reason
+        assert math.isfinite(node.get_parameter(name).value)
+    assert node.set_parameters([Parameter('bias', value=0.5)])[0].successful
 
 
 @pytest.mark.parametrize('name, problem', [

@@ -38,6 +38,7 @@ import threading
 import cv2
 from helio_drivers.sim.kernels import (bin_on_raster, noisy_read_out, relit_texture,
                                        thermal_counts, thermal_counts_at, tone_table_read_out)
+from helio_optics.calibration_board import draw_board
 from helio_optics.geometry import PinholeCamera
 from helio_optics.ground_render import (decode_srgb8, GroundRenderer, GroundTexture,
                                         jpeg_round_trip, linear_to_srgb,
@@ -455,14 +456,16 @@ class RgbCamera:
 
     def __init__(self, panel_extent, pixel_size, settings=None, marker_side=0.04,
                  marker_id=0, dictionary='DICT_4X4_50', seed=0, print_reflectance=(0.0, 1.0),
-                 camera=None, marker_scale=1.0):
+                 camera=None, marker_scale=1.0, board=None):
         """
         Build the panel's albedo texture (pixels aligned with the char raster).
 
         `print_reflectance` (ink, paper): the marker print's linear reflectance
         (``ground_render.draw_marker``). `camera`: the true PinholeCamera (a build's,
         ``sim.build``: distortion included); default the settings' ideal one.
-        `marker_scale`: the marker as printed over `marker_side` (a build's).
+        `marker_scale`: the marker as printed over `marker_side` (a build's). `board`:
+        (BoardSpec, centre (x, y), yaw) of a ChArUco board printed as the marker is
+        (``helio_optics.calibration_board.draw_board``), or None.
         """
         self.settings = settings or RgbSettings()
         self.camera = camera or self.settings.camera()
@@ -477,6 +480,9 @@ class RgbCamera:
                                      dictionary=dictionary, seed=seed,
                                      print_reflectance=print_reflectance,
                                      marker_scale=marker_scale)
+        if board is not None:
+            spec, centre, yaw = board
+            draw_board(texture, spec, centre, yaw, print_reflectance)
         self.extent = tuple(panel_extent)
         self.pixel_size = float(pixel_size)
         # linear, rows from y_max (top view); RGB and a fourth, empty channel: OpenCV warps

@@ -31,6 +31,7 @@ from helio_drivers.sim.flux import irradiance_on_cells, lens_pose_in_world, Lens
 from helio_drivers.sim.kernels import char_canvas
 from helio_drivers.sim.sun import CloudCover, RandomClouds, Sun
 from helio_drivers.sim.wood import GridParameters, WoodPanel, WoodParameters
+from helio_optics.calibration_board import BoardSpec
 from helio_optics.ephemeris import Site
 from helio_optics.geometry import invert_transform
 from helio_optics.lens import LensParameters
@@ -73,6 +74,14 @@ class SimSettings:
     # a laser print on office paper: in full sun its black is still darker than its white in
     # the lens shadow (sky light only), by a factor of about 2 (an ideal print: 0, 1)
     marker_print_reflectance: tuple = (0.05, 0.85)   # (ink, paper), linear [-]
+    # a printed ChArUco board for the camera calibration (issue 29, item 5), printed as the
+    # marker is: its centre x, y [m] and yaw [rad] on the panel, () for none (the default:
+    # the panel as before); squares (columns, rows), their side and the markers' [m]
+    board_pose: tuple = ()
+    board_squares: tuple = (7, 5)
+    board_square: float = 0.014
+    board_marker: float = 0.0105
+    board_dictionary: str = 'DICT_5X5_100'
     rgb: RgbSettings = field(default_factory=RgbSettings)
     thermal: ThermalSettings = field(default_factory=ThermalSettings)
     # a datasheet's thermal camera (helio_optics.thermal_cameras: 'paper',
@@ -97,6 +106,18 @@ class SimSettings:
             raise ValueError(f'start_time {self.start_time!r} needs a UTC offset, '
                              'e.g. 2026-06-21T10:00:00+02:00')
         return when
+
+    def board(self):
+        """Return (BoardSpec, centre (x, y), yaw) of the printed board, or None (no board)."""
+        if not self.board_pose:
+            return None
+        if len(self.board_pose) != 3:
+            raise ValueError(f'board_pose must be [x, y, yaw] (m, m, rad) or empty, got '
+                             f'{list(self.board_pose)}')
+        spec = BoardSpec(tuple(int(v) for v in self.board_squares), float(self.board_square),
+                         float(self.board_marker), self.board_dictionary)
+        x, y, yaw = (float(v) for v in self.board_pose)
+        return spec, (x, y), yaw
 
     def cloud_cover(self):
         """Return the CloudCover of the schedule and the optional random process."""
@@ -234,7 +255,7 @@ class SimWorld:
                              print_reflectance=s.marker_print_reflectance,
                              camera=self.build.rgb_camera.true_camera(
                                  self.published_cameras['rgb']),
-                             marker_scale=self.build.marker_scale)
+                             marker_scale=self.build.marker_scale, board=s.board())
         self._rng = np.random.default_rng(s.seed)
         self._joints_source = joints
         self._holding_joints = self._joints_held = False     # one_instant

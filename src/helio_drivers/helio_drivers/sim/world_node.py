@@ -178,6 +178,12 @@ PARAMETER_DOCS = {
     'marker_dictionary': ('ArUco dictionary name', None, None),
     'marker_print_reflectance': ("the marker print's linear reflectance [ink, paper] [-]",
                                  None, None),
+    'board_pose': ('a printed ChArUco calibration board on the panel: its centre x, y [m] and '
+                   'yaw [rad] in the world frame (empty: none)', None, None),
+    'board_squares': ('the board: squares (columns, rows)', None, None),
+    'board_square': ("the board's square side [m]", 0.002, 0.2),
+    'board_marker': ("the board's marker side [m]", 0.001, 0.2),
+    'board_dictionary': ("the board's ArUco dictionary name", None, None),
     'rgb.width': ('RGB image width [px]', 16, 4096),
     'rgb.height': ('RGB image height [px]', 16, 4096),
     'rgb.horizontal_fov': ('RGB horizontal field of view [rad]', 0.1, 3.0),

@@ -4,7 +4,10 @@ Declaring node parameters with descriptors: the one helper every helio node uses
 No rclpy import: it takes the node, and builds rcl_interfaces descriptors (description, a
 numeric range, a list of allowed strings, read-only). A float default gets a floating-point
 range, an int default an integer range (step 1); rclpy then refuses a value outside it, at
-start-up (parameter overrides) and in set_parameters.
+start-up (parameter overrides) and in set_parameters. A number must be finite (issue 35):
+rclpy's range check lets NaN through (it compares false with both bounds), so a non-finite
+value of a parameter declared here is refused at start-up (ValueError naming it) and in
+set_parameters (a reason naming it), range or not.
 
 Read once or read live. A node that reads a parameter only while it starts declares it
 read-only (the default here): setting it at run time is refused with a reason instead of
@@ -105,7 +108,37 @@ def declare(node, name, default, description, minimum=None, maximum=None, choice
     value = node.declare_parameter(name, default, descriptor).value
     if choices and value not in choices:
         raise ValueError(f'parameter {name} must be one of {choices}, got {value!r}')
+    problem = non_finite_problem(name, value)
+    if problem:
+        raise ValueError(problem)
+    if dynamic:
+        _refuse_non_finite_at_run_time(node)
     return value
+
+
+def non_finite_problem(name, value):
+    """Return why `value` of parameter `name` is refused as not finite, or ''."""
+    values = value if isinstance(value, (list, tuple)) else [value]
+    bad = [v for v in values if isinstance(v, float) and not math.isfinite(v)]
+    if bad:
+        return f'parameter {name} must be a finite number, got {bad[0]}'
+    return ''
+
+
+def _refuse_non_finite_at_run_time(node):
+    """Add, once per node, a set_parameters check that refuses NaN and infinities by name."""
+    if getattr(node, '_helio_non_finite_check', False):
+        return
+    from rcl_interfaces.msg import SetParametersResult
+
+    def check(parameters):
+        for parameter in parameters:
+            problem = non_finite_problem(parameter.name, parameter.value)
+            if problem:
+                return SetParametersResult(successful=False, reason=problem)
+        return SetParametersResult(successful=True)
+    node.add_on_set_parameters_callback(check)
+    node._helio_non_finite_check = True
 
 
 def declare_joint_lookup(node, rest_hold=1.0, rest_after_newest=True):
