@@ -133,14 +133,14 @@ def view_candidates(rig, camera, spec, centre, yaw=0.0, distances=(0.12, 0.145, 
     return views
 
 
-def plan_camera_views(views, camera, count=25, angle_scale=math.radians(30.0),
-                      tilt_scale=math.radians(45.0)):
+def plan_camera_views(views, camera, count=25, tilt_bin=math.radians(10.0)):
     """
     Return at most `count` of the CameraViews `views`, picked greedily (module docstring).
 
-    A view's score is the image cells it fills (0..1), plus its board normal's angle from
-    the nearest one chosen (up to `angle_scale`, 0..1), plus the board's tilt against the
-    image plane (up to `tilt_scale`, 0..1): tilted views in new directions first.
+    A view's score is the share of new image cells its corners fill (0..1) plus how few
+    views chosen so far have its tilt against the image plane, within `tilt_bin`
+    (1 / (1 + their number)): the tilts spread over all the candidates offer, each of them
+    seen in several views (a fit that leans on one view leans on its noise).
     """
     columns, rows = GRID
     cells = []
@@ -149,21 +149,24 @@ def plan_camera_views(views, camera, count=25, angle_scale=math.radians(30.0),
         v = np.clip((view.pixels[:, 1] / camera.height * rows).astype(int), 0, rows - 1)
         cells.append(v * columns + u)
     normals = np.array([view.normal for view in views]).reshape(-1, 3)
-    tilt = np.minimum(np.arccos(np.clip(np.abs(normals[:, 2]), 0.0, 1.0)), tilt_scale)
+    # the tilt, signed by the side the board leans to (the normals lie in about one plane)
+    side = np.sign(normals[:, 1] + 1e-12)
+    tilt = side * np.arccos(np.clip(np.abs(normals[:, 2]), 0.0, 1.0))
+    bins = np.floor(tilt / tilt_bin).astype(int)
     cover = np.zeros(columns * rows)
-    nearest = np.full(len(views), angle_scale)     # angle to the nearest normal chosen
+    in_bin = {}
     chosen = []
     remaining = np.ones(len(views), bool)
     while np.any(remaining) and len(chosen) < count:
         gain = np.array([np.mean(1.0 / (1.0 + cover[c])) for c in cells])
-        score = gain + nearest / angle_scale + tilt / tilt_scale
+        balance = np.array([1.0 / (1.0 + in_bin.get(b, 0)) for b in bins])
+        score = gain + balance
         score[~remaining] = -np.inf
         best = int(np.argmax(score))
         chosen.append(best)
         remaining[best] = False
         np.add.at(cover, cells[best], 1.0)
-        angles = np.arccos(np.clip(normals @ normals[best], -1.0, 1.0))
-        nearest = np.minimum(nearest, angles)
+        in_bin[bins[best]] = in_bin.get(bins[best], 0) + 1
     return [views[i] for i in chosen]
 
 

@@ -310,7 +310,7 @@ def test_homing_service_answers_when_the_arm_is_home_and_not_while_in_alarm(grap
 @pytest.mark.parametrize('name, values, named', [
     ('joint_velocity_dps', [100.0, 0.0, 100.0, 100.0], 'j2 0'),
     ('joint_velocity_dps', [-10.0] * 4, 'j1 -10'),
-    ('joint_acceleration_dps2', [100.0, 100.0, 100.0, math.inf], 'j4 inf'),
+    ('joint_acceleration_dps2', [100.0, 100.0, 100.0, math.inf], 'value 4 of 4 is inf'),
     ('joint_acceleration_dps2', [100.0] * 3, 'needs 4 values')])
 def test_unusable_joint_limits_stop_the_driver_at_start_naming_them(name, values, named):
     # issue 35: accepted before, they killed the emulated arm at its first move

@@ -139,7 +139,7 @@ def test_non_finite_numbers_are_refused_at_start_and_at_run_time_by_name(make_no
     with pytest.raises((ValueError, InvalidParameterValueException), match='gain'):
         declare(node, 'gain', 0.9, 'a gain [-]', 0.01, 2.0)
     node = make_node([Parameter('offsets', value=[0.0, value])])
-    with pytest.raises(ValueError, match='offsets must be a finite number'):
+    with pytest.raises(ValueError, match='offsets: value 2 of 2 is .*not a finite number'):
         declare(node, 'offsets', [0.0, 0.0], 'offsets [m]')
     node = make_node()
     assert declare(node, 'bias', 0.0, 'a bias without a range [m]', dynamic=True) == 0.0

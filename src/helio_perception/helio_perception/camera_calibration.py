@@ -10,16 +10,25 @@ printed ChArUco board (``helio_optics.calibration_board.BoardSpec``) into that f
   ArUco markers first, the chessboard corners between them interpolated and refined to
   sub-pixel), with their board coordinates; a view with fewer than ``min_corners``
   corners, or whose corners all lie on one line, is refused with the reason.
-- ``calibrate``: ``cv2.calibrateCameraExtended`` over the views. Fitted: fx, fy, cx, cy and
-  the distortion k1, k2, p1, p2 (OpenCV's plumb_bob; ROS ``camera_calibration``'s default
-  as well). k3 is held at 0: it matters only for wide-angle lenses, and over a webcam's
-  70 degree field of view it trades off with k1 and k2, so fitting it from 25 views makes
-  k1 worse, not the model better. The skew is 0. The fit starts from the camera's nominal
-  intrinsics when given (a focal length from the field of view), else from OpenCV's own
-  guess. Views are then refused one at a time while the worst view's RMS reprojection
-  error is above ``max_view_rms`` [px] and above ``outlier_factor`` times the median of
-  the views (a blurred frame, a corner taken at the wrong place, the arm still moving),
-  and the fit is redone without it; at least ``min_views`` must remain.
+- ``evenly_lit``: corners that the lens' shadow or its concentrated light cross are left
+  out (they move by tenths of a pixel: enough to bias the focal length).
+- ``calibrate``: ``cv2.calibrateCameraExtended`` over the views. Fitted: one focal length
+  fx = fy (square pixels), the principal point cx, cy and the radial distortion k1, k2 of
+  OpenCV's plumb_bob model; held: the tangential p1 = p2 = 0 and k3 = 0. Why: the rig's
+  wrist tilts the camera against a board lying on the panel about one axis only (the lens
+  pitch; ``helio_control.camera_views``), and views tilted about parallel axes cannot
+  separate fx from fy, nor the principal point along the tilt from the tangential
+  distortion and the tilt itself (Sturm and Maybank's critical motions for plane-based
+  calibration): fitted free, fx and fy came out 0.2-0.5 % apart and cy 1-3 px off in the
+  simulated rig. Webcam sensors have square pixels, and their decentring (tangential)
+  distortion is a small fraction of a pixel; k3 matters only for wide-angle lenses and over
+  a 70 degree field trades off with k1 and k2. ``square_pixels=False`` and
+  ``tangential=True`` fit them for views that are free of that limit (a board held by
+  hand). The fit starts from the camera's nominal intrinsics when given (a focal length
+  from the field of view), else from OpenCV's own guess. Corners are then refused while
+  any lies farther from its reprojection than ``corner_factor`` times the median corner's
+  (a corner taken at the wrong place, a shadow's edge that ``evenly_lit`` missed), and the
+  fit is redone without them; a view left with too few corners is refused with the reason.
 - ``write_camera_info``/``read_camera_info``: the YAML of ``camera_calibration_parsers``
   (the format ``camera_info_manager`` and ``usb_cam``'s ``camera_info_url`` read):
   ``image_width``, ``image_height``, ``camera_name``, ``camera_matrix``,
@@ -171,7 +180,7 @@ def _fit(views, size, guess, options):
     flags = cv2.CALIB_FIX_K3
     if options.get('square_pixels', True):
         flags |= cv2.CALIB_FIX_ASPECT_RATIO
-    if not options.get('tangential', True):
+    if not options.get('tangential', False):
         flags |= cv2.CALIB_ZERO_TANGENT_DIST
     matrix = distortion = None
     if guess is not None:
@@ -207,8 +216,8 @@ def calibrate(views, size, guess=None, min_views=6, min_corners=6, corner_factor
     refused while any lies farther from its reprojection than `corner_factor` times the
     median corner's (at least `min_corner_limit` [px]), and the fit redone without them
     (at most `rounds` fits); a view left with fewer than `min_corners` corners is refused.
-    `options`: ``square_pixels`` (default True: fx = fy), ``tangential`` (default True: fit
-    p1, p2). Returns a CameraCalibration; ValueError when fewer than `min_views` views
+    `options`: ``square_pixels`` (default True: fx = fy), ``tangential`` (default False:
+    p1 = p2 = 0). Returns a CameraCalibration; ValueError when fewer than `min_views` views
     remain.
     """
     views = list(views)

@@ -118,10 +118,13 @@ def declare(node, name, default, description, minimum=None, maximum=None, choice
 
 def non_finite_problem(name, value):
     """Return why `value` of parameter `name` is refused as not finite, or ''."""
-    values = value if isinstance(value, (list, tuple)) else [value]
-    bad = [v for v in values if isinstance(v, float) and not math.isfinite(v)]
-    if bad:
-        return f'parameter {name} must be a finite number, got {bad[0]}'
+    if isinstance(value, float) and not math.isfinite(value):
+        return f'parameter {name}: {value} is not a finite number'
+    if isinstance(value, (list, tuple)):
+        for index, element in enumerate(value):
+            if isinstance(element, float) and not math.isfinite(element):
+                return (f'parameter {name}: value {index + 1} of {len(value)} is {element}, '
+                        'not a finite number')
     return ''
 
 
