@@ -14,6 +14,7 @@ The ``helio`` command: run the graph, paint, record, replay, report.
     helio udev [--install]                           (the serial devices' udev rule)
     helio calibrations [--dir DIR] [--rig FILE]      (what is saved, and for which rig)
     helio calibrate rig|world [--poses N] [--no-apply]   (run one on the running graph)
+    helio calibrate camera [--board-centre X Y] [--board-square M] ...   (the RGB camera)
     helio doctor [--namespace NS] [--window S] ...   (the rig's checklist, a fix for each)
     helio stop [--namespace NS]                      (the emergency stop)
     helio sky [--date D] [--heading DEG] [--site FILE] [options]   (when the sun serves)
@@ -696,13 +697,17 @@ def build_parser(action_type=None):
     calibrations.set_defaults(handler=command_calibrations)
 
     calibrate = commands.add_parser(
-        'calibrate', help='run a calibration of the lens planner on the running graph',
+        'calibrate', help='run a calibration on the running graph',
         description="Send the calibration goal to the running graph's lens planner, print "
         'its progress and result. "rig": the build errors from the marker and the spot '
         '(CalibrateRig, about 5 minutes of rig time; each fitted term with its rig-file '
         'value and uncertainty, and the terms the poses cannot see); "world": T_robot_world '
-        'from the marker (CalibrateWorld). Exit 1 when it fails or is refused.')
-    calibrate.add_argument('what', choices=('rig', 'world'), help='which calibration')
+        'from the marker (CalibrateWorld). "camera": the RGB camera\'s intrinsics from at '
+        'most 25 views of a printed ChArUco board ("helio print board") laid on the panel, '
+        'moved to through the drivers; writes camera_info/rgb.yaml into the calibration '
+        "directory (usb_cam's camera_info_url, spot_detector's camera_info_file). Exit 1 "
+        'when it fails or is refused.')
+    calibrate.add_argument('what', choices=('rig', 'world', 'camera'), help='which calibration')
     calibrate.add_argument('--poses', type=_non_negative_int, default=0,
                            help="poses to visit (0: the lens planner's parameter)")
     calibrate.add_argument('--no-apply', action='store_true',
@@ -712,6 +717,28 @@ def build_parser(action_type=None):
                            help='seconds to wait for the lens planner')
     calibrate.add_argument('--timeout', type=_finite_float, default=1800.0,
                            help='longest wait for the result [s]')
+    board = calibrate.add_argument_group('camera: the board as printed and where it lies')
+    board.add_argument('--board-squares', type=_positive_int, nargs=2, default=[7, 5],
+                       metavar=('COLUMNS', 'ROWS'), help='squares (default 7 5)')
+    board.add_argument('--board-square', type=_finite_float, default=0.025, metavar='M',
+                       help='square side as measured [m] (default 0.025)')
+    board.add_argument('--board-marker', type=_finite_float, default=0.018, metavar='M',
+                       help='marker side as measured [m] (default 0.018)')
+    board.add_argument('--board-dictionary', default='DICT_5X5_100',
+                       help='ArUco dictionary of its markers (default DICT_5X5_100)')
+    board.add_argument('--board-centre', type=_finite_float, nargs=2, default=[0.1, 0.1],
+                       metavar=('X', 'Y'), help="the board's centre on the panel, world frame "
+                       '(the marker\'s axes) [m] (default 0.1 0.1: over the canvas)')
+    board.add_argument('--board-yaw', type=_finite_float, default=0.0, metavar='DEG',
+                       help="the board's x axis from the marker's [deg] (default 0)")
+    board.add_argument('--fov', type=_finite_float, default=70.0, metavar='DEG',
+                       help="the camera's horizontal field of view, the fit's start when "
+                       'camera_info is uncalibrated [deg] (default 70)')
+    board.add_argument('--calibration-dir', help="where to write (default: the lens planner's "
+                       'calibration_dir, else ~/.helio/calibration)')
+    board.add_argument('--camera-name', default='rgb_camera',
+                       help="camera_name in the file (usb_cam's camera_name; default "
+                       'rgb_camera)')
     calibrate.set_defaults(handler=command_calibrate)
 
     doctor = commands.add_parser(
@@ -919,6 +946,8 @@ def command_calibrations(arguments):
 
 def command_calibrate(arguments):
     """Run calibrate_rig or calibrate_world on the running graph; print the result."""
+    if arguments.what == 'camera':
+        return command_calibrate_camera(arguments)
     from helio_msgs.action import CalibrateRig, CalibrateWorld
     from helio_optics.node_kit.in_process_graph import GraphTimeout, InProcessGraph
     from rclpy.action import ActionClient
@@ -958,6 +987,39 @@ def command_calibrate(arguments):
     if result.saved_to:
         print(f'saved to {result.saved_to}')
     return EXIT_OK if result.success else EXIT_FAILED
+
+
+def command_calibrate_camera(arguments):
+    """Calibrate the RGB camera over a ChArUco board on the running graph; write its file."""
+    from helio_control.camera_calibration_graph import calibrate_on_graph, GraphRig
+    from helio_optics.calibration_board import BoardSpec
+    from helio_optics.node_kit.in_process_graph import InProcessGraph
+    spec = BoardSpec(tuple(arguments.board_squares), arguments.board_square,
+                     arguments.board_marker, arguments.board_dictionary)
+
+    def progress(index, total, note):
+        print(f'[helio] view {min(index + 1, total)}/{total}: {note}', file=sys.stderr,
+              flush=True)
+
+    with InProcessGraph('helio_calibrate', namespace=arguments.namespace) as graph:
+        done = calibrate_on_graph(
+            graph, spec, tuple(arguments.board_centre), math.radians(arguments.board_yaw),
+            arguments.poses or 25, arguments.calibration_dir,
+            horizontal_fov=math.radians(arguments.fov), camera_name=arguments.camera_name,
+            apply=not arguments.no_apply, progress=progress,
+            graph_rig=GraphRig(graph, arguments.connect_timeout))
+    for note in done.notes:
+        print(note)
+    run = done.run
+    print(run.calibration.summary())
+    for name, sigma in run.calibration.sigmas.items():
+        if sigma > 0.0:
+            print(f'  {name} +- {sigma:.3g}')
+    for index, reason in run.collected.missed:
+        print(f'  pose {index + 1}: no view ({reason})')
+    if done.path:
+        print(f'saved to {done.path}')
+    return EXIT_OK
 
 
 def command_doctor(arguments):

@@ -34,6 +34,7 @@ from helio_optics.node_kit.joint_states import CAMERA_NODE_JOINT_STATE_DEPTH, Jo
 from helio_optics.node_kit.parameters import declare, declare_joint_lookup
 from helio_optics.node_kit.process_tuning import frozen_after_start_up, keep_large_buffers
 from helio_optics.node_kit.runner import run_node
+from helio_perception.camera_calibration import read_camera_info
 from helio_perception.frame_statistics import FrameStatistics, InputFreshness
 from helio_perception.ground_plane import MarkerConfig, RESPONSES
 from helio_perception.spot_detection import SpotConfig, THRESHOLD_MODES
@@ -225,10 +226,19 @@ class SpotDetectorNode(Node):
                                           'wall time [s].', 0.0, 3600.0)
         self.freshness = InputFreshness.declared(self, 'rgb/image_raw', time.monotonic())
 
+        self.camera_info_file = declare(
+            self, 'camera_info_file', '',
+            'A camera_info YAML (camera_calibration_parsers\' format, as "helio calibrate '
+            'camera" writes it) used while rgb/camera_info is uncalibrated (K all zero, as '
+            'usb_cam sends without a calibration file); a file for another image size than '
+            "rgb/camera_info's is refused with the reason. A calibrated rgb/camera_info is "
+            "used as it comes ('': no file).")
         self.stats = FrameStatistics()
         self.joints = JointStateBuffer()
         self.camera = None
         self._info_key = None
+        self._file_camera = None     # (PinholeCamera or None, why not) of camera_info_file
+        self.file_refused = ''       # why camera_info_file was refused last ('' if it was not)
         self.spot_pub = self.create_publisher(SpotObservation, 'spot',
                                               QoSProfile(depth=10,
                                                          reliability=ReliabilityPolicy.RELIABLE))
@@ -268,6 +278,9 @@ class SpotDetectorNode(Node):
         key = (tuple(msg.k), tuple(msg.d), msg.width, msg.height)
         if key == self._info_key:
             return
+        if self.camera_info_file and not any(msg.k):
+            self._take_file_camera(msg, key)
+            return
         try:
             camera = camera_from_info(msg)
         except ValueError as error:
@@ -278,8 +291,41 @@ class SpotDetectorNode(Node):
         if msg.distortion_model not in ('plumb_bob', 'rational_polynomial', '') and any(msg.d):
             self.get_logger().warn(f'distortion model {msg.distortion_model!r}: using its first '
                                    'five coefficients as plumb_bob', once=True)
+        if self.camera_info_file and self._info_key is None:
+            self.get_logger().info(f'rgb/camera_info is calibrated: using it, not '
+                                   f'camera_info_file {self.camera_info_file}')
         self.camera, self._info_key = camera, key
         self.observer.reset()
+
+    def _take_file_camera(self, msg, key):
+        """Use camera_info_file for an uncalibrated rgb/camera_info, or refuse it with why."""
+        if self._file_camera is None or self._file_camera[0] is None:
+            try:
+                self._file_camera = (read_camera_info(self.camera_info_file)[0], '')
+            except ValueError as error:
+                self._file_camera = (None, str(error))
+        camera, why = self._file_camera
+        if camera is not None and msg.width and msg.height and \
+                (msg.width, msg.height) != (camera.width, camera.height):
+            why = (f'{self.camera_info_file} is for {camera.width}x{camera.height} images, '
+                   f'rgb/camera_info says {msg.width}x{msg.height}: calibrate this camera at '
+                   'this size ("helio calibrate camera")')
+            camera = None
+        self.file_refused = why if camera is None else ''
+        if camera is None:
+            self.camera, self._info_key = None, None
+            self.stats.bad_frame('uncalibrated camera_info')
+            self.get_logger().error(f'rgb/camera_info is uncalibrated (K = 0) and '
+                                    f'camera_info_file is refused: {why}',
+                                    throttle_duration_sec=10.0)
+            return
+        self.camera, self._info_key = camera, key
+        self.observer.reset()
+        m = camera.matrix
+        self.get_logger().info(
+            f'rgb/camera_info is uncalibrated (K = 0): using {self.camera_info_file} '
+            f'({camera.width}x{camera.height}, fx {m[0, 0]:.2f} fy {m[1, 1]:.2f} cx '
+            f'{m[0, 2]:.2f} cy {m[1, 2]:.2f} px, k1 {camera.distortion[0]:.4f})')
 
     def on_image(self, msg):
         """

@@ -25,7 +25,11 @@ and publishes:
   frame, with each RGB image and its stamp); ``light`` (helio_msgs/LightTruth: the light's
   power centre, the peak irradiance on the panel and the DNI, to tell whether the focus is
   on the wood); ``build`` (std_msgs/String, once: the rig as built, ``sim.build.Build``
-  as YAML, the same as ``build.yaml`` beside ``canvas.png``).
+  as YAML, the same as ``build.yaml`` beside ``canvas.png``); ``rgb_camera_info``
+  (sensor_msgs/CameraInfo, once: the RGB camera's TRUE intrinsics, which its images are
+  rendered with; ``rgb/camera_info`` holds the nominal ones, or K = 0 with
+  ``rgb_uncalibrated``). A ChArUco calibration board lies on the panel when ``board_pose``
+  is set (issue 29).
   No controller node subscribes to them: the controller must find the sun and the marker
   itself (a test enforces that).
 
@@ -309,7 +313,11 @@ class SimWorldNode(Node):
         self.clock_pub = self.create_publisher(Clock, '/clock', QoSProfile(depth=1))
         # camera_info holds the intrinsics the user's calibration gave, not the build's
         published = self.world.published_cameras
-        self._rgb_topics = self._camera_topics('rgb', 'rgb8', published['rgb'])
+        uncalibrated = declare(
+            self, 'rgb_uncalibrated', False,
+            'rgb/camera_info says K = 0, as usb_cam does for a webcam without a calibration '
+            "file (the camera calibration's starting point; the images stay the same)")
+        self._rgb_topics = self._camera_topics('rgb', 'rgb8', published['rgb'], uncalibrated)
         self._thermal_topics = self._camera_topics(
             'thermal', self.world.thermal_settings.encoding, published['thermal'])
         self.canvas_pub = self.create_publisher(Image, 'sim/canvas', QoSProfile(depth=1))
@@ -325,6 +333,10 @@ class SimWorldNode(Node):
         self.truth_build_pub = self.create_publisher(String, 'sim/truth/build', TRUTH_QOS)
         self.truth_build_pub.publish(String(data=yaml.safe_dump(self.build.to_dict(),
                                                                 sort_keys=False)))
+        self.truth_rgb_camera_pub = self.create_publisher(
+            CameraInfo, 'sim/truth/rgb_camera_info', TRUTH_QOS)
+        self.truth_rgb_camera_pub.publish(camera_info_from_camera(
+            self.world.rgb.camera, None, 'rgb'))
         self._cameras_out = set()
         self._plug(declare(
             self, 'unplugged', [''],
@@ -423,15 +435,23 @@ class SimWorldNode(Node):
         self._thread = threading.Thread(target=self._run, name='sim-world', daemon=True)
         self._thread.start()
 
-    def _camera_topics(self, name, encoding, camera):
-        """Return the CameraTopics of camera `name`: `name`/image_raw and `name`/camera_info."""
+    def _camera_topics(self, name, encoding, camera, uncalibrated=False):
+        """
+        Return the CameraTopics of camera `name`: `name`/image_raw and `name`/camera_info.
+
+        `uncalibrated`: the CameraInfo has the image size and nothing else (K = 0).
+        """
         # the intrinsics do not change: the CameraInfo is serialised once, restamped per frame
+        info = camera_info_from_camera(camera, None, name)
+        if uncalibrated:
+            info = CameraInfo(width=info.width, height=info.height)
+            info.header.frame_id = name
         return CameraTopics(
             image=self.create_publisher(Image, f'{name}/image_raw', qos_profile_sensor_data),
             info=self.create_publisher(CameraInfo, f'{name}/camera_info',
                                        qos_profile_sensor_data),
             encoding=encoding, frame_id=name,
-            info_bytes=serialize_message(camera_info_from_camera(camera, None, name)))
+            info_bytes=serialize_message(info))
 
     def _declare(self, name, default):
         description, minimum, maximum = PARAMETER_DOCS.get(name, (name, None, None))
