@@ -26,7 +26,7 @@ import math
 class FocusLease:
     """Whether the lens at the heating distance is still held for a live client."""
 
-    def __init__(self, timeout=1.0, wall_timeout=0.5):
+    def __init__(self, timeout=0.15, wall_timeout=0.3):
         """Expire after `timeout` [s node clock] and `wall_timeout` [s wall] of silence."""
         if not (timeout > 0.0 and wall_timeout > 0.0):
             raise ValueError(f'lease timeouts must be > 0 s, got {timeout} and {wall_timeout}')

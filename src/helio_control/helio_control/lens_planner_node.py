@@ -277,10 +277,10 @@ class LensPlannerNode(Node):
             'for (the painter): silent past both lease timeouts, the lens is retreated '
             "('': off)")
         self.lease = FocusLease(
-            declare(self, 'lease_timeout', 1.0,
+            declare(self, 'lease_timeout', 0.15,
                     'Heartbeat silence (node clock) after which a lens left at the heating '
                     'distance is retreated, with lease_timeout_wall [s].', 0.05, 60.0),
-            declare(self, 'lease_timeout_wall', 0.5,
+            declare(self, 'lease_timeout_wall', 0.3,
                     'The same silence in wall time (both must pass) [s].', 0.05, 60.0))
         if lease_topic:
             self.create_subscription(Header, lease_topic, self._on_heartbeat, 10)

@@ -330,7 +330,7 @@ class PainterNode(Node):
         # clock it goes on while /clock pauses.
         self.heartbeat_publisher = self.create_publisher(Header, 'painter/heartbeat', 10)
         heartbeat_period = declare(
-            self, 'heartbeat_period', 0.1,
+            self, 'heartbeat_period', 0.05,
             "Period of painter/heartbeat, the lens planner's focus lease, on the node clock "
             'and on the wall clock [s].', 0.01, 1.0)
         self.create_timer(heartbeat_period, self._beat)
