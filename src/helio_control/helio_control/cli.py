@@ -728,7 +728,7 @@ def build_parser(action_type=None):
                        help='ArUco dictionary of its markers (default DICT_5X5_100)')
     board.add_argument('--board-centre', type=_finite_float, nargs=2, default=[0.1, 0.1],
                        metavar=('X', 'Y'), help="the board's centre on the panel, world frame "
-                       '(the marker\'s axes) [m] (default 0.1 0.1: over the canvas)')
+                       "(the marker's axes) [m] (default 0.1 0.1: over the canvas)")
     board.add_argument('--board-yaw', type=_finite_float, default=0.0, metavar='DEG',
                        help="the board's x axis from the marker's [deg] (default 0)")
     board.add_argument('--fov', type=_finite_float, default=70.0, metavar='DEG',

@@ -95,8 +95,8 @@ def test_the_camera_info_file_round_trips_in_camera_info_managers_format(tmp_pat
     assert document['distortion_model'] == 'plumb_bob'
     assert (document['camera_matrix']['rows'], document['camera_matrix']['cols']) == (3, 3)
     assert document['distortion_coefficients']['cols'] == 5
-    assert document['rectification_matrix']['data'] == [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0,
-                                                         0.0, 1.0]
+    identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    assert document['rectification_matrix']['data'] == identity
     assert document['projection_matrix']['data'] == [455.5, 0.0, 321.25, 0.0, 0.0, 455.5,
                                                      238.75, 0.0, 0.0, 0.0, 1.0, 0.0]
     read, name = read_camera_info(path)
@@ -189,3 +189,19 @@ def test_the_planned_views_are_reachable_tilted_and_keep_the_focus_off_the_paper
         assert np.min(np.linalg.norm(pixels - corner, axis=1)) < 150.0
     with pytest.raises(ValueError, match='poses show the board'):
         plan_views(rig, camera, spec, (0.6, 0.6), 0.0)    # a board out of reach
+
+
+def test_the_command_line_takes_the_board_as_printed_and_where_it_lies():
+    from helio_control.cli import build_parser
+    arguments = build_parser().parse_args(
+        ['calibrate', 'camera', '--board-squares', '7', '5', '--board-square', '0.0251',
+         '--board-marker', '0.018', '--board-centre', '0.095', '0.0', '--board-yaw', '90',
+         '--calibration-dir', '/tmp/calibration'])
+    assert arguments.what == 'camera' and arguments.handler.__name__ == 'command_calibrate'
+    assert arguments.board_squares == [7, 5] and arguments.board_square == 0.0251
+    assert arguments.board_centre == [0.095, 0.0] and arguments.board_yaw == 90.0
+    assert arguments.poses == 0                 # 0: the procedure's 25 views
+    defaults = build_parser().parse_args(['calibrate', 'camera'])
+    spec = BoardSpec(tuple(defaults.board_squares), defaults.board_square,
+                     defaults.board_marker, defaults.board_dictionary)
+    assert spec == BoardSpec()                  # the sheet "helio print board" prints

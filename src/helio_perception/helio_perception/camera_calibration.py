@@ -42,6 +42,7 @@ reads the file (its ``camera_info_file`` parameter).
 """
 
 from dataclasses import dataclass, field
+
 import cv2
 from helio_optics.geometry import PinholeCamera
 from helio_optics.ground_render import srgb_to_linear
@@ -93,7 +94,7 @@ class CameraCalibration:
 
 
 def grey(image):
-    """Return an 8-bit grey frame of an RGB (H, W, 3) or grey (H, W) uint8 image."""
+    """Return the 8-bit one-channel frame of an RGB (H, W, 3) or (H, W) uint8 image."""
     image = np.asarray(image)
     if image.dtype != np.uint8:
         raise ValueError(f'an 8-bit frame is needed, got {image.dtype.name}')
