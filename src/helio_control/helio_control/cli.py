@@ -1012,9 +1012,10 @@ def command_calibrate_camera(arguments):
         print(note)
     run = done.run
     print(run.calibration.summary())
-    for name, sigma in run.calibration.sigmas.items():
-        if sigma > 0.0:
-            print(f'  {name} +- {sigma:.3g}')
+    sigmas = run.calibration.sigmas      # fx = fy: one focal length, its sigma fy's
+    print('  one-sigma: ' + ', '.join(
+        f'{"fx = fy" if name == "fy" else name} {sigmas[name]:.3g}'
+        for name in ('fy', 'cx', 'cy', 'k1', 'k2') if name in sigmas))
     for index, reason in run.collected.missed:
         print(f'  pose {index + 1}: no view ({reason})')
     if done.path:
