@@ -294,18 +294,19 @@ def test_the_rig_calibration_finds_the_ideal_build_and_every_node_takes_it(plann
     assert error < 0.5
 
 
-def test_every_node_signalled_at_once_mid_heat_still_takes_the_focus_off_the_wood(planner):
-    # the module's last test: every node but the world is stopped
+def heat_then_pace(planner, target):
+    """
+    Focus on `target` at the heating distance, set the world to half real time, let it settle.
+
+    Return (light collector, now(): the latest /clock [s], the heating peak irradiance).
+    """
     graph = planner.graph
     light = graph.collect(LightTruth, 'sim/truth/light',
                           QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE))
     clock = graph.collect(Clock, '/clock', QoSProfile(depth=10))
-    response = planner.run(FocusLens, 'focus', focus_goal(0.07, 0.08))    # heating distance
+    response = planner.run(FocusLens, 'focus', focus_goal(*target))    # heating distance
     assert response.result.success, response.result.message
-    world = AsyncParameterClient(graph.helper, 'sim_world')
-    graph.wait_until(world.services_are_ready, 60.0, 'sim_world parameters')
-    graph.on_executor(lambda: world.set_parameters(
-        [Parameter('real_time_factor', value=0.5)]), 60.0, 'the parameter response')
+    set_world(graph, real_time_factor=0.5)
 
     def now():
         return stamp_to_seconds(clock.wait_for_count(1, 60.0)[-1].clock)
@@ -313,14 +314,63 @@ def test_every_node_signalled_at_once_mid_heat_still_takes_the_focus_off_the_woo
     clock.wait_until(lambda m: m and stamp_to_seconds(m[-1].clock) >= settled, 60.0, '0.5 s')
     peak = max(m.peak_irradiance for m in light.messages
                if stamp_to_seconds(m.header.stamp) >= settled - 0.3)
+    return light, now, peak
+
+
+def set_world(graph, **values):
+    """Set sim_world parameters at run time."""
+    world = AsyncParameterClient(graph.helper, 'sim_world')
+    graph.wait_until(world.services_are_ready, 60.0, 'sim_world parameters')
+    graph.on_executor(lambda: world.set_parameters(
+        [Parameter(name, value=value) for name, value in values.items()]), 60.0,
+        'the parameter response')
+
+
+def focus_off_after(light, since, peak):
+    """Return the simulated seconds from `since` until the peak irradiance fell under 25 %."""
+    off = light.wait_for_message(lambda m: stamp_to_seconds(m.header.stamp) >= since
+                                 and m.peak_irradiance < 0.25 * peak, 60.0)
+    return stamp_to_seconds(off.header.stamp) - since
+
+
+def test_a_killed_lens_planner_mid_heat_has_the_servo_driver_turn_the_lens_away(planner):
+    # issue 30: nobody else watches here (no painter): the lens planner SIGKILLed with the
+    # lens at the heating distance stops its lens/heating beats without a 'clear', and the
+    # servo driver's heating guard turns the lens off the sun by itself
+    light, now, peak = heat_then_pace(planner, (0.06, 0.08))
+    graph = planner.graph
+
+    def heating_publishers():
+        return {bytes(info.endpoint_gid) for info in
+                graph.helper.get_publishers_info_by_topic('lens/heating')}
+    killed = heating_publishers()
+    lens_planner = next(p for p in planner.group.processes if p.label == 'lens_planner')
+    planner.may_die.add('lens_planner')
+    try:
+        since = now()
+        lens_planner.signal(signal.SIGKILL)
+        delay = focus_off_after(light, since, peak)
+        lens_planner.process.wait(30.0)
+    finally:
+        set_world(planner.graph, real_time_factor=0.0)
+    print(f'\nkilled lens planner: the focus off the wood {delay:.2f} s (sim) after the kill')
+    assert delay <= 0.5
+    # a new lens planner, as the operator starts it again, for the module's last test
+    lens_planner.start()
+    planner.may_die.discard('lens_planner')
+    planner.clients.pop('focus', None)
+    graph.wait_until(lambda: heating_publishers() - killed, 60.0, 'the new lens planner')
+
+
+def test_every_node_signalled_at_once_mid_heat_still_takes_the_focus_off_the_wood(planner):
+    # the module's last test: every node but the world is stopped
+    light, now, peak = heat_then_pace(planner, (0.07, 0.08))
     stopped = [p for p in planner.group.processes if p.label != 'sim_world']
     planner.may_die.update(p.label for p in stopped)
     since = now()
     for process in stopped:                   # what ros2 launch does on Ctrl-C
         process.signal(signal.SIGINT)
-    off = light.wait_for_message(lambda m: stamp_to_seconds(m.header.stamp) >= since
-                                 and m.peak_irradiance < 0.25 * peak, 60.0)
-    delay = stamp_to_seconds(off.header.stamp) - since
+    delay = focus_off_after(light, since, peak)
     statuses = {p.label: p.process.wait(30.0) for p in stopped}
     print(f'\nevery node signalled at once: the focus off the wood {delay:.2f} s (sim) after '
           f'it; exit statuses {statuses}')

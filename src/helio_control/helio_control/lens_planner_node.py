@@ -44,7 +44,6 @@ from geometry_msgs.msg import PoseStamped
 from helio_control import lens_moves, rig_calibration, sun_sweep
 from helio_control.calibration_store import CalibrationRefused, load_calibration
 from helio_control.calibration_store import rig_description, save_calibration
-from helio_control.focus_lease import FocusLease
 from helio_control.world_calibration import estimate_world_in_robot, marker_poses
 from helio_msgs.action import (CalibrateFocus, CalibrateRig, CalibrateWorld, FocusLens,
                                MoveArm, MoveWrist, SweepSun)
@@ -62,6 +61,7 @@ from helio_optics.node_kit.conversions import stamp_from_seconds, stamp_to_secon
 from helio_optics.node_kit.deployment import declare_lens, declare_rig, declare_site
 from helio_optics.node_kit.deployment import follow_world_calibration, RIG_CALIBRATION_TOPIC
 from helio_optics.node_kit.emergency_stop import EmergencyStopListener
+from helio_optics.node_kit.focus_lease import CLEAR, FocusLease, HEATING, HEATING_TOPIC
 from helio_optics.node_kit.joint_states import JointStateBuffer
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.qos import LATCHED, reliable
@@ -286,6 +286,18 @@ class LensPlannerNode(Node):
             self.create_subscription(Header, lease_topic, self._on_heartbeat, 10)
             self.create_timer(0.05, self._check_lease,
                               clock=Clock(clock_type=ClockType.STEADY_TIME))
+        # the servo driver's heating guard (issue 30): beats while a lens this node placed is at
+        # the heating distance, 'clear' once it leaves; on both clocks, as the painter's
+        self.heating_publisher = self.create_publisher(Header, HEATING_TOPIC, 10)
+        self._heating_said = None
+        heating_beat = declare(
+            self, 'heating_beat_period', 0.05,
+            'Period of the lens/heating beats while the lens is at the heating distance, on '
+            "the node clock and on the wall clock (the servo driver's heating guard) [s].",
+            0.01, 1.0)
+        self.create_timer(heating_beat, self._beat_heating)
+        self.create_timer(heating_beat, self._beat_heating,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.arm = ActionClient(self, MoveArm, 'move_arm')
         self.wrist = ActionClient(self, MoveWrist, 'move_wrist')
         self.estimator = self.create_client(EstimateSun, 'estimate_sun')
@@ -382,6 +394,14 @@ class LensPlannerNode(Node):
 
     def _on_heartbeat(self, _message):
         self.lease.heard(self._now(), time.monotonic())
+
+    def _beat_heating(self):
+        """Beat on lens/heating while the lens is at the heating distance; say 'clear' once."""
+        heating = bool(self._at_heating)
+        if heating or self._heating_said is not False:
+            self.heating_publisher.publish(Header(
+                stamp=self.get_clock().now().to_msg(), frame_id=HEATING if heating else CLEAR))
+            self._heating_said = heating
 
     def _check_lease(self):
         """Retreat a lens left at the heating distance by a client that went silent."""

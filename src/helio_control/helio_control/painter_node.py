@@ -320,7 +320,7 @@ class PainterNode(Node):
         self.joints_now = {}               # every joint's latest position, by name [rad]
         self.create_subscription(JointState, 'joint_states', self._on_joints, 20)
         self.window_publisher = self.create_publisher(PointStamped, 'thermal/window', LATCHED)
-        # the lens planner's focus lease (helio_control.focus_lease): while this heartbeat
+        # the lens planner's focus lease (helio_optics.node_kit.focus_lease): while this heartbeat
         # lives, a lens left at the heating distance is the painter's to watch; a painter
         # killed outright stops it, and the lens planner retreats the lens
         # (issue 31) It beats on both clocks: on the node clock the simulated world holds at

@@ -478,13 +478,36 @@ class DeviceActionNode(Node):
             self.get_logger().warning('emergency stop reset: goals are taken again')
             self._publish_status()
             return
+        done = self._stop_and_escape('EMERGENCY STOP')
+        self.setup_notes['emergency'] = (
+            f'EMERGENCY STOP engaged ({"; ".join(d for d in done if d)}); '
+            + emergency_stop.HOW_TO_RESET)
+        self.get_logger().error(self.setup_notes['emergency'])
+        self._publish_status()
+
+    def request_escape(self, why):
+        """
+        From any thread: stop the running job and the device, then make the emergency move.
+
+        Done once on the device thread, as for an emergency stop but not latched: goals are
+        taken again at once. `why` heads the aborted job's message and the log line.
+        """
+        def escape():
+            done = self._stop_and_escape(why)
+            self.get_logger().error(f'{why}: {"; ".join(d for d in done if d)}')
+            self._publish_status()
+        self._calls.append(escape)
+        self._wake.set()
+
+    def _stop_and_escape(self, why):
+        """Abort the job (stopping the device), stop it anyway, make the emergency move."""
         done = []
         run = self._run
         stopped_already = False
         if run is not None:
             # a job that may have moved the device is stopped (and the stop confirmed) here
             stopped_already = run.started
-            self._stop_and_answer(run, 'abort', f'EMERGENCY STOP: {run.what} aborted')
+            self._stop_and_answer(run, 'abort', f'{why}: {run.what} aborted')
             done.append(f'{run.what} aborted')
         if self.client.connected:
             try:
@@ -496,11 +519,7 @@ class DeviceActionNode(Node):
                 done.append(f'the {self.spec.label} could NOT be stopped: {error}')
         else:
             done.append(f'the {self.spec.label} is not connected ({self._message})')
-        self.setup_notes['emergency'] = (
-            f'EMERGENCY STOP engaged ({"; ".join(d for d in done if d)}); '
-            + emergency_stop.HOW_TO_RESET)
-        self.get_logger().error(self.setup_notes['emergency'])
-        self._publish_status()
+        return done
 
     def emergency_move(self):
         """

@@ -27,6 +27,14 @@ the graph follows. Engaged, it aborts a running move, holds the servos and turns
 pitch ``emergency_turn`` off its axis at the escape speed (the focus spreads off the wood),
 and refuses goals until the reset.
 
+The heating guard (issue 30): the lens planner beats on ``lens/heating`` (std_msgs/Header,
+frame_id ``heating``) while a lens it placed is at the heating distance, and says ``clear``
+when the lens leaves it. Beats that stop without a ``clear`` for ``heating_guard_timeout``
+(node clock) and ``heating_guard_timeout_wall`` (both must pass: the
+``helio_optics.node_kit.focus_lease`` rule) mean the lens planner died there, or its retreat
+failed: this node then stops any move and turns the lens pitch ``emergency_turn`` off the
+sun by itself, as for an emergency stop but without refusing later goals.
+
 The action server exists only while the node has held its device once; a port held by
 another process makes the node refuse to start. A lost port is reopened with exponential
 backoff while goals abort at once; every connection and the shutdown hold both servos at
@@ -35,6 +43,7 @@ their current positions. The link, the device thread and the action plumbing are
 """
 
 import math
+import time
 
 from helio_drivers import maestro_protocol as proto
 from helio_drivers.device_action_node import (
@@ -43,10 +52,12 @@ from helio_drivers.maestro_client import MaestroClient
 from helio_drivers.serial_link import DeviceError
 from helio_msgs.action import MoveWrist
 from helio_optics.node_kit import emergency_stop
+from helio_optics.node_kit.focus_lease import CLEAR, FocusLease, HEATING, HEATING_TOPIC
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
 from helio_optics.rig_kinematics import escape_pitch
-from std_msgs.msg import Bool
+from rclpy.clock import Clock, ClockType
+from std_msgs.msg import Bool, Header
 from std_srvs.srv import Trigger
 
 AXES = ('yaw', 'pitch')
@@ -126,11 +137,50 @@ class ServoDriverNode(DeviceActionNode):
         self.emergency_publisher.publish(Bool(data=False))
         self.create_service(Trigger, emergency_stop.SERVICE, self._engage_emergency_stop)
         self.create_service(Trigger, emergency_stop.RESET_SERVICE, self._reset_emergency_stop)
+        guard_topic = declare(
+            self, 'heating_guard_topic', HEATING_TOPIC,
+            'std_msgs/Header beats of the lens planner while a lens is at the heating '
+            "distance (frame_id 'heating', then 'clear'): silent past both guard timeouts, "
+            "the lens is turned off the sun ('': off).")
+        self.heating_guard = FocusLease(
+            declare(self, 'heating_guard_timeout', 0.15,
+                    'Silence of the heating beats (node clock) after which the lens is '
+                    'turned off the sun, with heating_guard_timeout_wall [s].', 0.05, 60.0),
+            declare(self, 'heating_guard_timeout_wall', 0.3,
+                    'The same silence in wall time (both must pass) [s].', 0.05, 60.0))
+        if guard_topic:
+            self.create_subscription(Header, guard_topic, self._on_heating_beat, 10)
+            self.create_timer(0.05, self._check_heating_guard,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.device_limits_qus = {}     # axis -> (low, high) the Maestro was seen to clamp to
         self.envelopes = {axis: proto.PositionEnvelope(self.tolerance_qus) for axis in AXES}
         self.readings_dropped = 0       # possible values that no move explains (line noise)
         self._limits_sent = {}          # axis -> (speed, acceleration) units last sent
         self.start_device()
+
+    # ---- heating guard ----------------------------------------------------------------------
+
+    def _node_and_wall_now(self):
+        return self.get_clock().now().nanoseconds * 1e-9, time.monotonic()
+
+    def _on_heating_beat(self, message):
+        now, wall_now = self._node_and_wall_now()
+        if message.frame_id == HEATING:
+            self.heating_guard.heard(now, wall_now)
+            self.heating_guard.placed(at_heating=True, alive_when_asked=True)
+        elif message.frame_id == CLEAR:
+            self.heating_guard.disarm()
+
+    def _check_heating_guard(self):
+        """Turn the lens off the sun when the lens planner fell silent with the lens heating."""
+        now, wall_now = self._node_and_wall_now()
+        if not self.heating_guard.expired(now, wall_now):
+            return
+        silence, wall_silence = self.heating_guard.silence(now, wall_now)
+        self.heating_guard.disarm()
+        self.request_escape(
+            f'HEATING GUARD: the lens planner fell silent with the lens at the heating '
+            f'distance ({silence:.2f} s node clock, {wall_silence:.2f} s wall)')
 
     # ---- emergency stop ---------------------------------------------------------------------
 

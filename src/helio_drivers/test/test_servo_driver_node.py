@@ -11,6 +11,7 @@ from helio_drivers.servo_driver_node import ServoDriverNode
 from helio_msgs.action import MoveWrist
 from node_harness import ClockPublisher, driver_on, DriverGraph
 import pytest
+from std_msgs.msg import Header
 
 # yaw reversed and offset, as a mounted servo may be; pitch on channel 3
 YAW = proto.ServoCalibration('lens_yaw', 0, min_pulse_us=700.0, max_pulse_us=2300.0,
@@ -288,3 +289,38 @@ def test_a_device_silent_mid_move_aborts_and_holds_the_servos_when_it_answers(wr
     target_us, position_us = emulator.target_pulse_widths_us()[3], emulator.pulse_widths_us()[3]
     assert 0.1 < PITCH.angle(target_us) < 1.4
     assert target_us == pytest.approx(position_us, abs=0.25)
+
+
+def test_the_lens_planner_silent_while_heating_turns_the_lens_off_the_sun_and_clear_does_not(
+        wrist):
+    # issue 30: a lens planner that dies with the lens at the heating distance cannot
+    # retreat it; its lens/heating beats stop without a 'clear', and the driver turns the
+    # lens pitch emergency_turn (0.6 rad) off the sun by itself, within the guard's
+    # timeouts (0.15 s node clock and 0.3 s wall; no /clock here: both are the wall)
+    emulator, graph = wrist
+    assert graph.run(MoveWrist.Goal(yaw=0.2, pitch=-0.2)).result.success
+    beats = graph.helper.create_publisher(Header, 'lens/heating', 10)
+
+    def pitch_now():
+        return graph.joint_states.wait_for_count(len(graph.joint_states.messages) + 1)[-1] \
+            .position[1]
+
+    def beat(frame_id, count):
+        for _ in range(count):
+            beats.publish(Header(frame_id=frame_id))
+            graph.joint_states.wait_for_count(len(graph.joint_states.messages) + 1)
+    # beats, then 'clear': the lens left the heating distance as planned; nothing moves
+    beat('heating', 10)
+    beat('clear', 1)
+    held_until = time.monotonic() + 1.0
+    while time.monotonic() < held_until:
+        assert pitch_now() == pytest.approx(-0.2, abs=1e-3)
+    # beats, then silence: the lens is turned away, and later goals are still taken
+    beat('heating', 10)
+    silent_at = time.monotonic()
+    graph.joint_states.wait_for_message(lambda m: abs(m.position[1] + 0.2) >= 0.59, 5.0)
+    print(f'\nturned 0.6 rad {time.monotonic() - silent_at:.2f} s (wall) after the last beat')
+    assert graph.driver.heating_guard.armed is False
+    assert graph.wait_status(lambda s: s.connected)
+    assert graph.run(MoveWrist.Goal(yaw=0.0, pitch=0.0)).result.success
+    graph.helper.destroy_publisher(beats)

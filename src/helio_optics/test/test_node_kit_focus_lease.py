@@ -1,6 +1,6 @@
 """The focus lease: when a lens left at the heating distance is taken away."""
 
-from helio_control.focus_lease import FocusLease
+from helio_optics.node_kit.focus_lease import FocusLease
 import pytest
 
 

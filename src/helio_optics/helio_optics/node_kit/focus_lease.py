@@ -17,6 +17,12 @@ lens planner, which placed the lens, holds a lease on that heartbeat:
   (a heartbeat 0.1 s of simulated time late is 10 ms of wall time) nor a paused one makes
   the lease expire while the painter is alive.
 
+One step down, the servo driver holds the same lease on the lens planner (issue 30): the
+lens planner beats on ``lens/heating`` while a lens it placed is at the heating distance and
+says ``clear`` when it leaves; a lens planner that dies there (or whose retreat fails)
+falls silent, and the servo driver turns the lens off the sun by itself
+(``LensHeatingBeat``, ``servo_driver``'s ``heating_guard``).
+
 Pure Python: no rclpy. Times in seconds.
 """
 
@@ -66,3 +72,8 @@ class FocusLease:
     def _silent(self, now, wall_now):
         node_silence, wall_silence = self.silence(now, wall_now)
         return node_silence > self.timeout and wall_silence > self.wall_timeout
+
+
+# lens/heating (std_msgs/Header): frame_id says whether a lens is at the heating distance
+HEATING_TOPIC = 'lens/heating'
+HEATING, CLEAR = 'heating', 'clear'
