@@ -205,3 +205,11 @@ def test_the_command_line_takes_the_board_as_printed_and_where_it_lies():
     spec = BoardSpec(tuple(defaults.board_squares), defaults.board_square,
                      defaults.board_marker, defaults.board_dictionary)
     assert spec == BoardSpec()                  # the sheet "helio print board" prints
+
+
+def test_the_world_has_no_board_unless_asked_and_refuses_a_malformed_pose():
+    assert SimSettings().board() is None                   # every figure as before
+    with pytest.raises(ValueError, match=r'board_pose must be \[x, y, yaw\]'):
+        SimSettings(board_pose=(0.095, 0.0)).board()
+    spec, centre, yaw = SimSettings(board_pose=BOARD_POSE).board()
+    assert spec == BoardSpec((7, 5), 0.014, 0.0105) and centre == (0.095, 0.0) and yaw == 0.0
