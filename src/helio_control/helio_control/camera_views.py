@@ -23,9 +23,11 @@ ones give their corners to the sampling and the detector cannot read the markers
 
 From the candidates ``plan_camera_views`` picks at most `count` greedily: each next view is
 the one adding most to (a) the image cells its corners fall in that earlier views left empty
-(a 6 x 4 grid, each corner counting 1 / (1 + corners the cell holds already)), (b) the
-angle between its board normal, seen from the camera, and the nearest one chosen before
-(up to ``angle_scale``), and (c) its tilt against the image plane (up to ``tilt_scale``).
+(a 6 x 4 grid, each corner counting 1 / (1 + corners the cell holds already)) plus (b) the
+tilts chosen so far: 1 / (1 + the views already in its 10 degree bin of tilt against the
+image plane, signed by the side the board leans to). The tilts spread over all the wrist
+offers, each seen in several views: a plan of mostly steep views left the focal length
+hanging on its one or two square-on views (dropping one moved it by 0.26 %).
 No rclpy.
 """
 
