@@ -15,7 +15,9 @@ freezing the output 0.3-1 s. Judged by the world's truth (``sim/canvas``, ``sim/
 - a camera that hangs mid-dot, repeating its last frame for good (``thermal_stuck``), is a
   stale stream once its frames have been frozen for ``thermal_freeze_max`` (1.5 s): from
   then, the focus off the wood within the watchdog's 0.5 s, as for a stream that stops, and
-  the dot heated again once the camera is back.
+  the dot heated again once the camera is back;
+- last, the Dobot driver killed (SIGKILL) mid-dot (issue 30): the painter hears its joint
+  states stop and the wrist turns the lens away, the focus off the wood within 0.5 s.
 """
 
 from conftest import graph_of_processes
@@ -23,8 +25,8 @@ from helio_control.run_journal import read_journal
 from helio_msgs.action import PaintPattern
 from helio_optics.node_kit.conversions import stamp_to_seconds
 import pytest
-from test_painter_safety import (dots_along, nearest, NODES, OFF_BOUND, painting_interrupted,
-                                 Rig, TIMEOUT)
+from test_painter_safety import (dots_along, killed_driver_mid_dot, nearest, NODES, OFF_BOUND,
+                                 painting_interrupted, Rig, TIMEOUT)
 
 CAMERA = 'lepton35_high_gain'
 CAP = 140.0                   # its datasheet's high-gain read-out cap [degC]
@@ -43,7 +45,9 @@ def rig(tmp_path_factory):
                  'thermal_monitor': {'camera_profile': CAMERA},
                  'lens_planner': {'calibration_dir': str(tmp_path / 'calibration')},
                  'painter': {'runs_dir': str(tmp_path / 'runs')}}
-    with graph_of_processes(tmp_path, NODES, overrides) as (group, graph):
+    # the module's last test kills the Dobot driver
+    with graph_of_processes(tmp_path, NODES, overrides, may_die=('dobot_driver',)) \
+            as (group, graph):
         yield Rig(group, graph, tmp_path / 'runs')
 
 
@@ -103,3 +107,10 @@ def test_a_camera_stuck_mid_dot_puts_the_focus_off_once_its_freeze_is_too_long(r
     result = rig.graph.goal_result(handle, TIMEOUT).result    # live again: heated again
     print(f'stuck: {result.message}')
     assert result.success and 'stale thermal stream' in result.message, result.message
+
+
+def test_a_killed_dobot_driver_leaves_the_retreat_to_the_wrist(rig):
+    # the module's last test: the Dobot driver is not started again
+    delay, result = killed_driver_mid_dot(rig, 'dobot_driver', 0.09)
+    assert 'the wrist turned the lens away' in result.message
+    assert delay <= OFF_BOUND

@@ -27,6 +27,9 @@ frame more or less shows. The word is painted once, with the window rule: with t
 rule it took 60 % longer (182 s against 116 s in a fresh run of the suite) for the same
 placement through the same nodes; the paper's rule is painted by the rows and by ``helio
 paint`` in ``test_operator_tools.py`` (the default rule).
+
+Last, the servo driver killed (SIGKILL) mid-dot (issue 30): the lens planner's retreat would
+move the wrist too, so the arm alone lifts the lens; the focus off the wood within 0.5 s.
 """
 
 import contextlib
@@ -42,6 +45,7 @@ from helio_optics.node_kit.conversions import image_to_numpy
 import numpy as np
 import pytest
 from sensor_msgs.msg import Image
+from test_painter_safety import killed_driver_mid_dot, OFF_BOUND, Rig
 
 NODES = ('sim_world', 'dobot_driver', 'servo_driver', 'spot_detector', 'thermal_monitor',
          'sun_estimator', 'lens_planner', 'painter')
@@ -93,11 +97,18 @@ def painting_graph(tmp_path):
     """Run the whole graph in `tmp_path` as a painting session does; yield its Painting."""
     # 6x: a painting is CPU-bound on 2 cores, and free (in lockstep with every consumer)
     # it ran slower in wall time than paced: 351 s for the word test against 287 s at 6x
+    # pace_max_lag 0: the last test's kill holds the world in lockstep for a second; it must
+    # not race to catch up after it, which would stretch the graph's reaction (test_painter_
+    # safety's reason)
     overrides = {'sim_world': {'real_time_factor': 6.0, 'flux_rays': 20000,
-                               'canvas_rate': 1.0},
+                               'canvas_rate': 1.0, 'pace_max_lag': 0.0},
                  'lens_planner': {'calibration_dir': str(tmp_path / 'calibration')}}
-    with graph_of_processes(tmp_path, NODES, overrides) as (_, graph):
-        yield Painting(graph, tmp_path / 'runs')
+    # the module's last test kills the servo driver
+    with graph_of_processes(tmp_path, NODES, overrides, may_die=('servo_driver',)) \
+            as (group, graph):
+        session = Painting(graph, tmp_path / 'runs')
+        session.group = group
+        yield session
 
 
 @pytest.fixture(scope='module')
@@ -234,3 +245,12 @@ def test_a_sample_word_is_painted_with_every_dot_charred_on_target_and_even(pain
           f'{cycles.mean():.1f} s per dot (sim)')
     assert errors.mean() <= 0.3e-3
     assert spread <= 0.10
+
+
+def test_a_killed_servo_driver_leaves_the_retreat_to_the_arm_alone(painting):
+    # the module's last test: the servo driver is not started again. Between the rows at
+    # y 0.07 and 0.09, clear of the N_p 15 dots (x <= 0.058) and of the word (y >= 0.101)
+    rig = Rig(painting.group, painting.graph, painting.run_root)
+    delay, result = killed_driver_mid_dot(rig, 'servo_driver', 0.08)
+    assert 'the arm lifted the lens' in result.message
+    assert delay <= OFF_BOUND

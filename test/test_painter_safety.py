@@ -304,6 +304,34 @@ def painting_interrupted(rig, name, y, interrupt, restore=lambda: None, dots=1, 
     return off - since, handle
 
 
+def killed_driver_mid_dot(rig, label, y, x=0.074):
+    """
+    SIGKILL the driver `label` while a dot heats at (x, y); return (delay [s sim], result).
+
+    A killed driver says nothing: the painter hears its joint states stop
+    (``device_silence`` of wall time) and retreats with the other device (a dead Dobot
+    driver: the wrist turns the lens away; a dead servo driver: the arm alone lifts the lens
+    straight up). Meanwhile the world, in lockstep with the drivers' joint states, holds its
+    time until it leaves the silent driver behind (``lockstep_timeout``). The driver is not
+    started again (a restarted driver went unheard by the painter for seconds, session 40):
+    only a module's last test calls this, with the driver in its graph's ``may_die``.
+    """
+    driver = rig.process(label)
+    rig.set_world(truth_period=0.05)         # the focus-off time to 0.05 s, not to the period
+
+    def kill(_handle):
+        driver.signal(signal.SIGKILL)
+        driver.process.wait(30.0)
+        return rig.now()
+
+    delay, handle = painting_interrupted(rig, f'{label}_killed', y, kill, x=x)
+    result = rig.graph.goal_result(handle, TIMEOUT).result
+    print(f'{label} killed: {result.message}')
+    device = 'dobot' if label == 'dobot_driver' else 'servo'
+    assert not result.success and device in result.message, result.message
+    return delay, result
+
+
 def one_graph_overrides(tmp_path):
     """Return the parameter overrides of a graph started for one painting interrupted."""
     return {'sim_world': {'real_time_factor': 0.0, 'flux_rays': 20000,

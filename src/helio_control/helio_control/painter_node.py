@@ -315,6 +315,7 @@ class PainterNode(Node):
         # the drivers' joint states on the wall clock, the painter's own pauses not counted
         pause = min(LONGEST_RUN_GAP, 0.5 * self.device_silence)
         self.drivers = DriverSilence(self.device_silence, pause)
+        self._silent_seen = set()          # the drivers silent at the last watch
         self.create_timer(pause / 5.0, self._watch_drivers,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.joints_now = {}               # every joint's latest position, by name [rad]
@@ -387,11 +388,18 @@ class PainterNode(Node):
         self.joints_now.update(zip(message.name, message.position))
 
     def _watch_drivers(self):
-        pause = self.drivers.tick(time.monotonic())
+        now = time.monotonic()
+        pause = self.drivers.tick(now)
         if pause:
             self.get_logger().warning(
                 f'the painter did not run for {pause:.2f} s (a starved or paused process): '
                 "the drivers' silence is counted again from now")
+        # a driver fallen silent wakes the heating loop at once (issue 30): it may wait on
+        # thermal statistics that a world holding for that driver's joint states never sends
+        silent = set(self.drivers.silent(now))
+        if silent - self._silent_seen:
+            self._wake_heating()
+        self._silent_seen = silent
 
     def _silent_devices(self):
         """Return {device: sentence} of the drivers whose joint states stopped (wall clock)."""

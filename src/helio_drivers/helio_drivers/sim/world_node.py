@@ -236,7 +236,8 @@ class SimWorldNode(Node):
     """Thin node around SimWorld and SimDevices; see the module docstring."""
 
     # the parameters that can change at run time
-    RUNTIME = ('cloud_schedule', 'unplugged', 'real_time_factor', 'thermal_stuck')
+    RUNTIME = ('cloud_schedule', 'unplugged', 'real_time_factor', 'thermal_stuck',
+               'truth_period')
     CAMERAS = ('rgb_camera', 'thermal_camera')   # `unplugged` names of the cameras
     RGB_FRAMES_IN_FLIGHT = 2     # on the RGB thread, at most (rgb_thread)
 
@@ -257,7 +258,8 @@ class SimWorldNode(Node):
         self.canvas_rate = declare(self, 'canvas_rate', 0.5,
                                    'sim/canvas rate [Hz sim]', 0.0, 10.0)
         self.truth_period = declare(self, 'truth_period', 1.0,
-                                    'period of the sim/truth/* topics [s sim]', 0.01, 3600.0)
+                                    'period of the sim/truth/* topics (a test times an event '
+                                    'finer around it) [s sim]', 0.01, 3600.0, dynamic=True)
         self.output_dir = declare(self, 'output_dir', '',
                                   'write canvas.png, canvas_mask.png and dots.csv here at '
                                   'shutdown')
@@ -368,8 +370,11 @@ class SimWorldNode(Node):
             declare(self, 'lockstep_lead', 0.2,
                     'How far the world may run ahead of lockstep_topic [s simulated]',
                     0.05, 60.0),
-            declare(self, 'lockstep_timeout', 1.0,
-                    'A lockstep_topic silent this long is left behind [s wall]', 0.05, 60.0))
+            declare(self, 'lockstep_timeout', 1.5,
+                    'A lockstep_topic silent this long is left behind; longer than the '
+                    "controllers' own silence limits (the painter's device_silence, 1 s), so "
+                    'the world holds until they have heard a source fall silent [s wall]',
+                    0.05, 60.0))
         # a world as fast as possible whose consumer went silent runs at this pace, not free:
         # free, it would outrun the drivers' wall-clock polling and starve its own emulators
         self._left_behind_pacer = Pacer(declare(
@@ -474,6 +479,8 @@ class SimWorldNode(Node):
                     self._pacer.set_real_time_factor(self.real_time_factor)
                 elif parameter.name == 'unplugged':
                     self._plug(parameter.value)
+                elif parameter.name == 'truth_period':
+                    self.truth_period = float(parameter.value)
                 elif parameter.name == 'thermal_stuck':
                     self.world.thermal_stuck = bool(parameter.value)
                     self.get_logger().warning(
