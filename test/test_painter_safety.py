@@ -365,52 +365,46 @@ def test_a_stale_thermal_stream_puts_the_focus_off_the_wood_within_half_a_second
     assert result.success and 'stale thermal stream' in result.message, result.message
 
 
-def test_an_unplugged_dobot_puts_the_focus_off_the_wood_within_half_a_second(rig):
+def unplugged_mid_dot(rig, device, x):
+    """
+    Unplug `device` ('dobot' or 'servo') while a dot heats at (x, 0.09), plug it back in.
+
+    Return (focus-off delay [s sim], result message) once the driver is heard again (the
+    painter refuses to paint while a driver is silent).
+    """
     def unplug(_handle):
         # the world unplugs in its parameter callback, before it answers: the reaction is
         # counted from the answer, not from the request (whose trip to the world is the
         # test's, not the graph's: 1 s of wall time once under two busy processes)
-        rig.set_world(unplugged=['dobot'])
+        rig.set_world(unplugged=[device])
         return rig.now()
 
     try:
-        delay, handle = painting_interrupted(rig, 'unplug', 0.09, unplug)
+        delay, handle = painting_interrupted(rig, f'unplug_{device}', 0.09, unplug, x=x)
         result = rig.graph.goal_result(handle, TIMEOUT).result
     finally:
         rig.set_world(unplugged=[''])
-    print(f'unplug: {result.message}')
-    assert delay <= OFF_BOUND
-    assert not result.success and 'dobot' in result.message
-    assert 'wrist turned the lens away' in result.message
-    # plugged back in: the driver reconnects and its joint states flow again (the painter
-    # refuses to paint while a driver is silent)
-    connected = len(rig.dobot.messages)
-    rig.dobot.wait_until(lambda m: len(m) > connected and m[-1].connected, 60.0,
-                         'the Dobot connected again')
+    print(f'unplugged {device}: {result.message}')
+    assert not result.success and device in result.message
+    joint = 'dobot_j1' if device == 'dobot' else 'lens_yaw'
     heard = len(rig.joints.messages)
-    rig.joints.wait_until(lambda m: any('dobot_j1' in j.name for j in m[heard:]), 60.0,
-                          "the Dobot's joint states again")
+    rig.joints.wait_until(lambda m: any(joint in j.name for j in m[heard:]), 60.0,
+                          f"the {device}'s joint states again")
+    return delay, result.message
+
+
+def test_an_unplugged_dobot_puts_the_focus_off_the_wood_within_half_a_second(rig):
+    delay, message = unplugged_mid_dot(rig, 'dobot', 0.05)
+    assert delay <= OFF_BOUND
+    assert 'wrist turned the lens away' in message
 
 
 def test_an_unplugged_maestro_puts_the_focus_off_the_wood_within_half_a_second(rig):
     # issue 35: the wrist's device falls silent mid-dot (its pty closes as on a USB unplug);
     # the lens planner's retreat would move the wrist too, so the arm alone lifts the lens
-    def unplug(_handle):
-        rig.set_world(unplugged=['servo'])
-        return rig.now()
-
-    try:
-        delay, handle = painting_interrupted(rig, 'unplug_maestro', 0.09, unplug, x=0.06)
-        result = rig.graph.goal_result(handle, TIMEOUT).result
-    finally:
-        rig.set_world(unplugged=[''])
-    print(f'unplugged maestro: {result.message}')
+    delay, message = unplugged_mid_dot(rig, 'servo', 0.06)
     assert delay <= OFF_BOUND
-    assert not result.success and 'servo' in result.message
-    assert 'the arm lifted the lens' in result.message
-    heard = len(rig.joints.messages)
-    rig.joints.wait_until(lambda m: any('lens_yaw' in j.name for j in m[heard:]), 60.0,
-                          "the wrist's joint states again")
+    assert 'the arm lifted the lens' in message
 
 
 def test_a_cancel_puts_the_focus_off_the_wood_within_half_a_second(rig):

@@ -61,7 +61,7 @@ from helio_optics.node_kit.conversions import stamp_from_seconds, stamp_to_secon
 from helio_optics.node_kit.deployment import declare_lens, declare_rig, declare_site
 from helio_optics.node_kit.deployment import follow_world_calibration, RIG_CALIBRATION_TOPIC
 from helio_optics.node_kit.emergency_stop import EmergencyStopListener
-from helio_optics.node_kit.focus_lease import CLEAR, FocusLease, HEATING, HEATING_TOPIC
+from helio_optics.node_kit.focus_lease import CLEAR, declare_lease, HEATING, HEATING_TOPIC
 from helio_optics.node_kit.joint_states import JointStateBuffer
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.qos import LATCHED, reliable
@@ -271,21 +271,11 @@ class LensPlannerNode(Node):
         self.focus_publisher = self.create_publisher(FocalCalibration, 'calibration/focus',
                                                      LATCHED)
         self.rig_publisher = self.create_publisher(String, RIG_CALIBRATION_TOPIC, LATCHED)
-        lease_topic = declare(
-            self, 'lease_topic', 'painter/heartbeat',
-            'std_msgs/Header heartbeat of the client a focus at the heating distance is held '
-            'for (the painter): silent past both lease timeouts, the lens is retreated '
-            "('': off)")
-        self.lease = FocusLease(
-            declare(self, 'lease_timeout', 0.15,
-                    'Heartbeat silence (node clock) after which a lens left at the heating '
-                    'distance is retreated, with lease_timeout_wall [s].', 0.05, 60.0),
-            declare(self, 'lease_timeout_wall', 0.3,
-                    'The same silence in wall time (both must pass) [s].', 0.05, 60.0))
-        if lease_topic:
-            self.create_subscription(Header, lease_topic, self._on_heartbeat, 10)
-            self.create_timer(0.05, self._check_lease,
-                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.lease = declare_lease(
+            self, 'lease', 'painter/heartbeat',
+            'the client a focus at the heating distance is held for (the painter)',
+            'a lens left at the heating distance is retreated', self._on_heartbeat,
+            self._check_lease)
         # the servo driver's heating guard (issue 30): beats while a lens this node placed is at
         # the heating distance, 'clear' once it leaves; on both clocks, as the painter's
         self.heating_publisher = self.create_publisher(Header, HEATING_TOPIC, 10)

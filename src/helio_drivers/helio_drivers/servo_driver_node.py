@@ -52,12 +52,11 @@ from helio_drivers.maestro_client import MaestroClient
 from helio_drivers.serial_link import DeviceError
 from helio_msgs.action import MoveWrist
 from helio_optics.node_kit import emergency_stop
-from helio_optics.node_kit.focus_lease import CLEAR, FocusLease, HEATING, HEATING_TOPIC
+from helio_optics.node_kit.focus_lease import CLEAR, declare_lease, HEATING, HEATING_TOPIC
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
 from helio_optics.rig_kinematics import escape_pitch
-from rclpy.clock import Clock, ClockType
-from std_msgs.msg import Bool, Header
+from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
 AXES = ('yaw', 'pitch')
@@ -137,21 +136,11 @@ class ServoDriverNode(DeviceActionNode):
         self.emergency_publisher.publish(Bool(data=False))
         self.create_service(Trigger, emergency_stop.SERVICE, self._engage_emergency_stop)
         self.create_service(Trigger, emergency_stop.RESET_SERVICE, self._reset_emergency_stop)
-        guard_topic = declare(
-            self, 'heating_guard_topic', HEATING_TOPIC,
-            'std_msgs/Header beats of the lens planner while a lens is at the heating '
-            "distance (frame_id 'heating', then 'clear'): silent past both guard timeouts, "
-            "the lens is turned off the sun ('': off).")
-        self.heating_guard = FocusLease(
-            declare(self, 'heating_guard_timeout', 0.15,
-                    'Silence of the heating beats (node clock) after which the lens is '
-                    'turned off the sun, with heating_guard_timeout_wall [s].', 0.05, 60.0),
-            declare(self, 'heating_guard_timeout_wall', 0.3,
-                    'The same silence in wall time (both must pass) [s].', 0.05, 60.0))
-        if guard_topic:
-            self.create_subscription(Header, guard_topic, self._on_heating_beat, 10)
-            self.create_timer(0.05, self._check_heating_guard,
-                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.heating_guard = declare_lease(
+            self, 'heating_guard', HEATING_TOPIC,
+            "the lens planner while a lens is at the heating distance (frame_id 'heating', "
+            "then 'clear')", 'the lens is turned off the sun', self._on_heating_beat,
+            self._check_heating_guard)
         self.device_limits_qus = {}     # axis -> (low, high) the Maestro was seen to clamp to
         self.envelopes = {axis: proto.PositionEnvelope(self.tolerance_qus) for axis in AXES}
         self.readings_dropped = 0       # possible values that no move explains (line noise)

@@ -23,7 +23,8 @@ says ``clear`` when it leaves; a lens planner that dies there (or whose retreat 
 falls silent, and the servo driver turns the lens off the sun by itself
 (``LensHeatingBeat``, ``servo_driver``'s ``heating_guard``).
 
-Pure Python: no rclpy. Times in seconds.
+``FocusLease`` is pure Python (no rclpy); ``declare_lease`` wires one on a node (its
+parameters, its beats, its check) and imports rclpy when called. Times in seconds.
 """
 
 import math
@@ -77,3 +78,31 @@ class FocusLease:
 # lens/heating (std_msgs/Header): frame_id says whether a lens is at the heating distance
 HEATING_TOPIC = 'lens/heating'
 HEATING, CLEAR = 'heating', 'clear'
+
+
+def declare_lease(node, prefix, topic, holder, action, on_beat, check):
+    """
+    Declare a lease's parameters on `node`, subscribe to its beats, check it; return it.
+
+    Parameters ``<prefix>_topic`` (default `topic`; '' turns the lease off),
+    ``<prefix>_timeout`` (0.15 s, node clock) and ``<prefix>_timeout_wall`` (0.3 s), with
+    descriptors saying whose beats they are (`holder`) and what is done when they stop
+    (`action`). `on_beat(message)` gets each std_msgs/Header beat; `check()` runs every
+    0.05 s of wall time (steady clock), so a paused ``/clock`` cannot hold it.
+    """
+    from helio_optics.node_kit.parameters import declare
+    from rclpy.clock import Clock, ClockType
+    from std_msgs.msg import Header
+    beats = declare(node, f'{prefix}_topic', topic,
+                    f'std_msgs/Header beats of {holder}: silent past both timeouts, {action} '
+                    "('': off).")
+    lease = FocusLease(
+        declare(node, f'{prefix}_timeout', 0.15,
+                f'Silence of the beats (node clock) after which {action}, with '
+                f'{prefix}_timeout_wall [s].', 0.05, 60.0),
+        declare(node, f'{prefix}_timeout_wall', 0.3,
+                'The same silence in wall time (both must pass) [s].', 0.05, 60.0))
+    if beats:
+        node.create_subscription(Header, beats, on_beat, 10)
+        node.create_timer(0.05, check, clock=Clock(clock_type=ClockType.STEADY_TIME))
+    return lease
