@@ -208,7 +208,7 @@ def test_an_uncalibrated_camera_info_is_reported_with_its_fix(rig):
         rig.graph.helper.destroy_publisher(publisher)
     level, line = lines['rgb camera_info calibrated']
     assert status == 1 and level == 'FAIL', output
-    assert 'K is all zero' in line and 'camera_calibration' in line
+    assert 'K is all zero' in line and 'helio calibrate camera' in line
     assert lines['thermal camera_info calibrated'][0] == 'OK'
 
 

@@ -268,8 +268,13 @@ def intrinsics_problem(k):
 def check_camera_info(kind, matrices, window):
     """Return the finding of a camera's camera_info: every K heard is a calibration."""
     name = f'{kind} camera_info calibrated'
-    fix = (f'calibrate the {kind} camera (ros2 run camera_calibration cameracalibrator, a '
-           'checkerboard) and give its driver the result (usb_cam: camera_info_url)')
+    if kind == 'rgb':      # the rig calibrates it over a printed board (issue 29, item 5)
+        fix = ('helio calibrate camera (the rig moves the camera over a ChArUco board printed '
+               'with helio print board), then give its driver the file (usb_cam: '
+               'camera_info_url) or spot_detector (camera_info_file)')
+    else:
+        fix = (f'calibrate the {kind} camera (ros2 run camera_calibration cameracalibrator, a '
+               'checkerboard) and give its driver the result (usb_cam: camera_info_url)')
     if not matrices:
         return Finding(name, FAIL, f'no {kind}/camera_info in {window:.1f} s', fix)
     problems = [intrinsics_problem(list(k)) for k in matrices]

@@ -86,9 +86,13 @@ def test_a_healthy_rig_passes_every_check(tmp_path):
 def test_an_uncalibrated_camera_info_fails_with_the_camera_calibration_fix(tmp_path):
     facts = healthy_facts(tmp_path)
     facts.camera_infos['rgb'] = facts.camera_infos['rgb'] + [[0.0] * 9]
-    result = finding(doctor.run_checks(facts), 'rgb camera_info calibrated')
+    facts.camera_infos['thermal'] = facts.camera_infos['thermal'] + [[0.0] * 9]
+    checks = doctor.run_checks(facts)
+    result = finding(checks, 'rgb camera_info calibrated')
     assert result.level == FAIL and '1 of 6' in result.finding and 'all zero' in result.finding
-    assert 'camera_calibration' in result.fix
+    assert 'helio calibrate camera' in result.fix     # the rig calibrates its RGB camera
+    thermal = finding(checks, 'thermal camera_info calibrated')
+    assert thermal.level == FAIL and 'camera_calibration' in thermal.fix   # a board is cold
 
 
 @pytest.mark.parametrize('k, problem', [
