@@ -76,7 +76,10 @@ DEFAULT_DIRECTORY = '~/.helio/calibration'
 
 def list_calibrations(directory, description):
     """
-    Return one dict per ``*.yaml`` of `directory` (sorted): what each calibration is.
+    Return one dict per calibration file of `directory`: what each calibration is.
+
+    First each ``*.yaml`` (sorted), then each camera_info file of its ``camera_info``
+    folder (``helio calibrate camera``).
 
     Keys: ``name``, ``usable`` (it would be read back for the rig description
     `description`), ``reason`` (why not, '' when usable), and from its record ``made_by``,
@@ -99,5 +102,37 @@ def list_calibrations(directory, description):
                     entry.update(yaml.safe_load(stream)['/**']['ros__parameters'][RECORD])
             except (OSError, yaml.YAMLError, KeyError, TypeError):
                 pass
+        entries.append(entry)
+    return entries + _camera_infos(directory)
+
+
+def _camera_infos(directory):
+    """
+    Return the entries of ``camera_info/*.yaml`` (``helio calibrate camera``'s files).
+
+    A camera's intrinsics do not depend on the rig description, so they are listed, not
+    judged by it: usable when the file is a camera_info file with a camera matrix; its first
+    comment line (when and by what) as ``made_by``.
+    """
+    from helio_perception.camera_calibration import read_camera_info
+    entries = []
+    folder = os.path.join(directory, 'camera_info')
+    if not os.path.isdir(folder):
+        return entries
+    for name in sorted(os.listdir(folder)):
+        if not name.endswith('.yaml'):
+            continue
+        path = os.path.join(folder, name)
+        entry = {'name': f'camera_info/{name}', 'usable': True, 'reason': ''}
+        try:
+            camera, camera_name = read_camera_info(path)
+            entry.update(camera=camera_name, size=f'{camera.width}x{camera.height}',
+                         fx_px=float(camera.matrix[0, 0]))
+            with open(path) as stream:
+                first = stream.readline()
+            if first.startswith('#'):
+                entry['made_by'] = first[1:].strip()
+        except (OSError, ValueError) as error:
+            entry.update(usable=False, reason=str(error))
         entries.append(entry)
     return entries

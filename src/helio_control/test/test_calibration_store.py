@@ -1,8 +1,13 @@
 """Calibration files: round trip, the rig description they were made for, bad files."""
 
+import math
+import os
+
 from helio_control.calibration_store import (
     CalibrationRefused, list_calibrations, load_calibration, rig_description, save_calibration)
 from helio_control.cli import main
+from helio_optics.geometry import PinholeCamera
+from helio_perception.camera_calibration import write_camera_info
 import pytest
 import yaml
 
@@ -57,5 +62,18 @@ def test_helio_calibrations_lists_each_file_and_says_which_this_rig_refuses(tmp_
     out = capsys.readouterr().out
     assert 'robot_world.yaml: saved ' in out and 'residual_position_m 2e-05; used' in out
     assert 'focus.yaml' in out and 'REFUSED' in out
+    # a camera calibration (helio calibrate camera): listed whatever the rig description
+    camera = PinholeCamera.from_fov(640, 480, math.radians(60.0))
+    os.makedirs(tmp_path / 'cal' / 'camera_info')
+    write_camera_info(str(tmp_path / 'cal' / 'camera_info' / 'rgb.yaml'), camera, 'rgb',
+                      ['written by helio calibrate camera at 2026-11-28T04:00:00+00:00'])
+    (tmp_path / 'cal' / 'camera_info' / 'thermal.yaml').write_text('image_width: 160\n')
+    entries = list_calibrations(directory, rig_description(str(other)))
+    cameras = {e['name']: e for e in entries if e['name'].startswith('camera_info/')}
+    assert cameras['camera_info/rgb.yaml']['usable']
+    assert cameras['camera_info/rgb.yaml']['fx_px'] == pytest.approx(camera.matrix[0, 0])
+    assert 'helio calibrate camera' in cameras['camera_info/rgb.yaml']['made_by']
+    assert not cameras['camera_info/thermal.yaml']['usable']
+    assert 'not a camera_info file' in cameras['camera_info/thermal.yaml']['reason']
     assert main(['calibrations', '--dir', str(tmp_path / 'none'), '--rig', str(rig)]) == 0
     assert 'no calibration saved' in capsys.readouterr().out
