@@ -1,0 +1,97 @@
+"""
+Charred dots measured per target in frames the simulated world renders (issue 29, item 4).
+
+The world's char is set as discs of known size at known places (the camera renders char
+wherever the char map has it), at 2 mm pitch (touching) and 3 mm pitch, a target left bare,
+a dot far too small; the RGB frame is taken with the lens retreated 3 cm over each target
+(its shadow and the defocused spot around the target). Each measure is judged by the
+world's char map measured the same way per target (``measure_in_mask``): no ROS.
+"""
+
+from dataclasses import replace
+
+from helio_drivers.sim.truth import true_sun_focus_joints
+from helio_drivers.sim.world import SimSettings, SimWorld
+from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
+from helio_perception.char_dots import CharSettings, measure_in_image, measure_in_mask
+from helio_perception.char_dots import measure_targets_in_mask
+import numpy as np
+import pytest
+
+EXPECTED = 0.002          # the expected diameter [m]
+# (x, y) [m] and the drawn diameter [m] (0: bare)
+ROW_2MM = [((0.070 + 0.002 * i, 0.080), d) for i, d in
+           enumerate((2.0e-3, 2.2e-3, 0.0, 1.8e-3, 2.0e-3))]
+ROW_3MM = [((0.070 + 0.003 * i, 0.086), d) for i, d in
+           enumerate((2.0e-3, 2.5e-3, 0.5e-3, 1.6e-3))]
+
+
+@pytest.fixture(scope='module')
+def world():
+    """Return a world with the rows' char drawn into its char map."""
+    world = SimWorld(replace(SimSettings(), flux_rays=8000),
+                     load_rig_parameters(default_rig_file()))
+    panel = world.panel
+    xs, ys = panel.raster_pixel_centres()
+    grid_x, grid_y = np.meshgrid(xs, ys)
+    for (x, y), diameter in ROW_2MM + ROW_3MM:
+        if diameter:
+            panel.char[np.hypot(grid_x - x, grid_y - y) <= diameter / 2] = 1.0
+    world.rgb.update_char(panel.char, (0, panel.char.shape[0], 0, panel.char.shape[1]))
+    return world
+
+
+def truth_of(world, target, neighbours):
+    """Return the world's char map's measure of the dot at `target`."""
+    panel = world.panel
+    return measure_in_mask(panel.charred_mask(), panel.raster_origin, panel.grid.fine_cell,
+                           target, EXPECTED, neighbours)
+
+
+@pytest.mark.parametrize('row', [ROW_2MM, ROW_3MM], ids=['2mm', '3mm'])
+def test_each_target_measured_in_a_frame_as_the_char_map_has_it(world, row):
+    targets = [target for target, _ in row]
+    for target, drawn in row:
+        neighbours = [t for t in targets if t != target]
+        world.set_joints(true_sun_focus_joints(world, target, 0.112))   # retreated 3 cm
+        world.step()
+        T_world_rgb, _ = world.camera_poses()
+        seen = measure_in_image(world.rgb_image(), world.published_cameras['rgb'],
+                                T_world_rgb, target, EXPECTED, neighbours)
+        truth = truth_of(world, target, neighbours)
+        print(f'{target}: drawn {drawn * 1e3:.2f} mm, char map {truth.diameter * 1e3:.2f} '
+              f'mm, camera {seen.diameter * 1e3:.2f} mm ({seen.reason or "charred"})')
+        assert seen.charred == truth.charred, (seen, truth)
+        assert truth.charred == (drawn >= 0.4 * EXPECTED * 1.01)
+        if truth.charred:
+            # per target: the touching neighbours' char is theirs
+            assert abs(truth.diameter - drawn) < 0.15e-3
+            assert abs(seen.diameter - truth.diameter) < 0.25 * truth.diameter
+            assert np.hypot(*(np.subtract(seen.centre, truth.centre))) < 0.3e-3
+        elif not drawn:
+            assert seen.diameter < 0.2 * EXPECTED and 'no char' in seen.reason
+
+
+def test_touching_dots_are_measured_per_target_not_per_region(world):
+    panel = world.panel
+    targets = [target for target, _ in ROW_2MM]
+    measures = measure_targets_in_mask(panel.charred_mask(), panel.raster_origin,
+                                       panel.grid.fine_cell, targets, EXPECTED)
+    drawn = [d for _, d in ROW_2MM]
+    assert [m.charred for m in measures] == [d > 0 for d in drawn]
+    for measure, diameter in zip(measures, drawn):
+        assert abs(measure.diameter - diameter) < 0.15e-3
+
+
+def test_a_target_out_of_the_frame_is_not_charred_and_says_why(world):
+    world.set_joints(true_sun_focus_joints(world, (0.07, 0.08), 0.112))
+    world.step()
+    T_world_rgb, _ = world.camera_poses()
+    seen = measure_in_image(world.rgb_image(), world.published_cameras['rgb'], T_world_rgb,
+                            (0.5, 0.5), EXPECTED)
+    assert not seen.charred and 'out of the image' in seen.reason
+
+
+def test_settings_that_cannot_measure_are_refused():
+    with pytest.raises(ValueError):
+        CharSettings(dark_ratio=0.0)
