@@ -10,7 +10,11 @@ The run journal: what a painting did, one JSON object per line, written as it ha
    "peak_n_p", "t_max", "outcome", "reason", "restarts"}`` per dot as it finishes (times in
    simulated or ROS seconds, ``dwell`` the heating time [s], ``t_max`` [degC], ``target``
    world [m], ``outcome`` one of ``burnt``, ``skipped``, ``failed``, ``restarts`` the
-   heatings broken off and begun again: a stale thermal stream, a cloud; 0 when absent);
+   heatings broken off and begun again: a stale thermal stream, a cloud; 0 when absent;
+   ``verdict`` the RGB camera's after the dot: ``charred``, ``not charred`` or ``''`` (not
+   verified), ``verdict_reason`` why not, ``measured_diameter`` the char's equivalent
+   diameter it measured [m] (0 without char), ``reheats`` the heatings again of a dot the
+   camera found not charred; absent in older journals);
 3. ``{"kind": "result", "success", "dots_burnt", "dots_skipped", "duration",
    "wall_duration", "message"}`` at the end.
 
@@ -25,6 +29,7 @@ import math
 import os
 
 OUTCOMES = ('burnt', 'skipped', 'failed')
+VERDICTS = ('charred', 'not charred', '')
 
 
 class JournalError(ValueError):
@@ -74,6 +79,10 @@ class DotRecord:
     outcome: str                # 'burnt', 'skipped' or 'failed'
     reason: str = ''
     restarts: int = 0           # heatings broken off and begun again (stale stream, cloud)
+    verdict: str = ''           # the RGB camera's: 'charred', 'not charred', '' (not verified)
+    verdict_reason: str = ''    # why not charred, or why not verified
+    measured_diameter: float = 0.0   # the char the camera measured at the target [m]
+    reheats: int = 0            # heatings again of a dot the camera found not charred
     kind: str = field(default='dot', init=False)
 
     def validate(self):
@@ -86,7 +95,11 @@ class DotRecord:
         self.n_p_target = _number(record, 'n_p_target', self.n_p_target, integer=True)
         self.peak_n_p = _number(record, 'peak_n_p', self.peak_n_p, integer=True)
         self.restarts = _number(record, 'restarts', self.restarts, integer=True)
-        for name in ('start', 'end', 'dwell', 't_max'):
+        self.reheats = _number(record, 'reheats', self.reheats, integer=True)
+        if self.verdict not in VERDICTS:
+            raise JournalError(f'{record}: verdict must be one of {VERDICTS}, not '
+                               f'{self.verdict!r}')
+        for name in ('start', 'end', 'dwell', 't_max', 'measured_diameter'):
             setattr(self, name, _number(record, name, getattr(self, name)))
         if self.outcome not in OUTCOMES:
             raise JournalError(f'{record}: outcome must be one of {OUTCOMES}, not '
