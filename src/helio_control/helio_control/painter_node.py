@@ -62,6 +62,7 @@ The run directory (``run_dir`` of the goal, else ``runs_dir``/<UTC time>) holds
 ``plan.json``, ``journal.jsonl`` (``helio_control.run_journal``) and ``resume.json``.
 """
 
+from dataclasses import replace
 import datetime
 import glob
 import hashlib
@@ -73,6 +74,7 @@ import traceback
 
 from geometry_msgs.msg import PointStamped
 from helio_control import sky
+from helio_control.dot_check import expected_dot
 from helio_control.dot_cycle import CycleSettings, Decision, DotCycle
 from helio_control.driver_silence import DriverSilence
 from helio_control.picture_input import picture_from_image_msg, PictureError
@@ -84,8 +86,11 @@ from helio_msgs.action import PaintPattern
 from helio_msgs.action import SweepSun
 from helio_msgs.msg import DeviceStatus, FocalCalibration, SpotObservation, SunEstimate
 from helio_msgs.msg import ThermalStats
+from helio_optics.geometry import invert_transform
 from helio_optics.node_kit import emergency_stop
 from helio_optics.node_kit.awaitables import discovered, FirstOf, NextTurn, sleep, within
+from helio_optics.node_kit.conversions import camera_from_info, image_to_numpy
+from helio_optics.node_kit.conversions import ImageConversionError
 from helio_optics.node_kit.conversions import point_to_array, stamp_to_seconds
 from helio_optics.node_kit.deployment import declare_rig, declare_site
 from helio_optics.node_kit.deployment import follow_world_calibration
@@ -93,12 +98,17 @@ from helio_optics.node_kit.emergency_stop import EmergencyStopListener
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.qos import LATCHED, reliable
 from helio_optics.node_kit.runner import run_node
-from helio_optics.rig_kinematics import escape_lift, escape_pitch, UnreachableError
+from helio_optics.rig_kinematics import escape_lift, escape_pitch, JOINT_NAMES
+from helio_optics.rig_kinematics import UnreachableError
+from helio_perception.char_dots import CharSettings, measure_in_image
+from helio_perception.ground_plane import RESPONSES
 import numpy as np
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
+from rclpy.qos import qos_profile_sensor_data
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Header
 
 RELIABLE = reliable(20)
@@ -216,7 +226,8 @@ class PainterNode(Node):
             "which the window rule does not wait at); 1.5 cm puts 9 % of the heating peak's "
             'irradiance on the wood (simulated lens) [m].', 0.0, 0.2)
         self.max_heating = declare(self, 'max_heating', 90.0,
-                                   'A dot held longer than this is given up [s].', 1.0, 3600.0)
+                                   'A dot held longer than this is given up (set at run time: '
+                                   'from the next dot on) [s].', 1.0, 3600.0, dynamic=True)
         self.max_cooling = declare(self, 'max_cooling', 60.0,
                                    "Longest wait for N_p = 0 (paper's rule) [s].", 1.0, 3600.0)
         self.thermal_stale = declare(
@@ -281,6 +292,43 @@ class PainterNode(Node):
                                 'with the arm alone (halved while a joint limit is in the '
                                 'way): 3 cm leaves a quarter of the peak irradiance, 6 cm '
                                 'about a tenth [m].', 0.005, 0.2)
+        self.verify_dots = declare(
+            self, 'verify_dots', True,
+            'After each dot, with the lens retreated, the RGB camera checks that a dot of the '
+            'expected size charred at the target (helio_perception.char_dots); the window '
+            "rule's dots are verified only where it retreats.")
+        self.verify_reheats = declare(
+            self, 'verify_reheats', 1,
+            'A dot the camera finds not charred is heated again at most this often, then '
+            'counted as failed [-].', 0, 5)
+        self.verify_timeout = declare(
+            self, 'verify_timeout', 2.0,
+            'Wait at most this long (wall clock) for an RGB frame after a dot; without one '
+            'the dot is recorded as not verified [s].', 0.1, 60.0)
+        self.char_settings = CharSettings(
+            dark_ratio=declare(self, 'verify.dark_ratio', 0.6,
+                               "Char: darker than this share of the bare wood's light around "
+                               'the target [-].', 0.05, 0.95),
+            min_diameter_ratio=declare(
+                self, 'verify.min_diameter_ratio', 0.5,
+                'A dot is charred when its char is at least this share of the expected '
+                "diameter (the plan's dot pitch at the paper's N_p 30, scaled by the square "
+                "root of the dot's N_p target over 30; set at run time: from the next look "
+                'on) [-].',
+                0.05, 2.0, dynamic=True),
+            response=declare(self, 'verify.camera_response', 'srgb',
+                             "The RGB camera's tone curve, undone before char is measured.",
+                             choices=RESPONSES))
+        self.add_post_set_parameters_callback(self._on_parameters_set)
+        self.rgb_camera = None
+        self._rgb_info_key = None
+        self._frame_waiters = []       # (since [s], FirstOf) of the verifications waiting
+        self.verified_dots = []
+        self.create_subscription(CameraInfo, 'rgb/camera_info', self._on_rgb_info,
+                                 qos_profile_sensor_data)
+        # raw: a frame is decoded only when a verification waits for it
+        self.create_subscription(Image, 'rgb/image_raw', self._on_frame,
+                                 qos_profile_sensor_data, raw=True)
 
         self.sun_max_sigma = declare(
             self, 'sun_max_sigma', 0.2,
@@ -629,6 +677,7 @@ class PainterNode(Node):
             return result
         self._busy, self._cancel_requested, self._stop_signal = True, False, ''
         self._thermal_interruptions = 0
+        self.verified_dots = []          # (index, DotMeasure) of every look of the camera
         wall_started = time.time()
         try:
             # under use_sim_time the clock reads 0 until the first /clock arrives: every
@@ -844,8 +893,10 @@ class PainterNode(Node):
             later = [j for j in todo if j > i]
             hot_next = cooling == 'window' and bool(later) and float(np.hypot(
                 *(plan.dots[later[0]] - target))) < self.window_separation
+            expected, neighbours = expected_dot(plan, i)
             outcome = await self._paint_dot(goal_handle, feedback, i, target, n_p_target,
-                                            cooling, goal.dry_run, result, hot_next)
+                                            cooling, goal.dry_run, result, hot_next,
+                                            expected, neighbours)
             cycles.append(outcome['end'] - outcome['start'])
             self._journal.dot(**outcome)
             if outcome['outcome'] == 'burnt':
@@ -877,9 +928,135 @@ class PainterNode(Node):
         if self._thermal_interruptions:
             result.message += (f'; {self._thermal_interruptions} heating(s) broken off by a '
                                'stale thermal stream and done again')
+        if self.verify_dots and not goal.dry_run:
+            seen = sum(measure.charred for _, measure in self.verified_dots)
+            result.message += (f'; {seen} dots verified by the camera, '
+                               f'{len(self.verified_dots) - seen} looks found no dot')
 
     async def _paint_dot(self, goal_handle, feedback, index, target, n_p_target, cooling,
-                         dry_run, result, hot_next=False):
+                         dry_run, result, hot_next=False, expected=0.0, neighbours=()):
+        """
+        Burn one dot and verify it with the RGB camera; return its journal record's fields.
+
+        The dot is heated (``_heat_dot``); once the lens is retreated (the paper's cooling
+        rule, or a window-rule dot whose next one lies in its hot region) the camera's
+        verdict (``_verify``) is recorded, a dot given up too; a dot burnt that it finds not
+        charred (nothing dark of at least ``verify.min_diameter_ratio`` of `expected` [m] at
+        the target) is heated again, at most ``verify_reheats`` times, then counted as
+        failed. The lens is retreated
+        through all of it: a failed verification leaves it where the heating left it, off
+        the wood.
+        """
+        record = await self._heat_dot(goal_handle, feedback, index, target, n_p_target,
+                                      cooling, dry_run, result, hot_next)
+        record.update(verdict='', verdict_reason='', measured_diameter=0.0, reheats=0)
+        if dry_run or not self.verify_dots or not record['dwell'] > 0.0:
+            return record             # nothing heated: nothing to see
+        while True:
+            if self._at_heating is not None:
+                record['verdict_reason'] = 'not verified: the lens is not retreated'
+                return record
+            feedback.phase = 'verifying'
+            goal_handle.publish_feedback(feedback)
+            began, wall = self._now(), time.monotonic()
+            measure, why = await self._verify(target, expected, neighbours)
+            self.get_logger().info(
+                f'dot {index}: the camera looked in {self._now() - began:.2f} s '
+                f'({time.monotonic() - wall:.2f} s wall): '
+                + (why if measure is None else
+                   f'{measure.diameter * 1e3:.2f} mm, {measure.reason or "charred"}'))
+            if measure is None:
+                self.get_logger().warning(f'dot {index} not verified: {why}')
+                record['verdict_reason'] = f'not verified: {why}'
+                return record
+            self.verified_dots.append((index, measure))
+            record.update(verdict='charred' if measure.charred else 'not charred',
+                          verdict_reason=measure.reason,
+                          measured_diameter=float(measure.diameter))
+            if measure.charred or record['outcome'] != 'burnt':
+                return record         # a dot given up (max_heating) is not heated again
+            if record['reheats'] >= self.verify_reheats:
+                record.update(outcome='failed', reason=(
+                    f'the RGB camera sees no dot at the target ({measure.reason}) after '
+                    f"{record['reheats'] + 1} heating(s)"))
+                return record
+            self.get_logger().warning(f'dot {index}: the RGB camera sees no dot '
+                                      f'({measure.reason}): heated again')
+            again = await self._heat_dot(goal_handle, feedback, index, target, n_p_target,
+                                         cooling, dry_run, result, hot_next)
+            record.update(reheats=record['reheats'] + 1, end=again['end'],
+                          dwell=record['dwell'] + again['dwell'],
+                          restarts=record['restarts'] + again['restarts'],
+                          peak_n_p=max(record['peak_n_p'], again['peak_n_p']),
+                          t_max=max(record['t_max'], again['t_max']))
+            if again['outcome'] != 'burnt':
+                record.update(outcome=again['outcome'], reason=again['reason'])
+                return record
+
+    async def _verify(self, target, expected, neighbours):
+        """
+        Measure the dot at `target` in the first RGB frame taken from now on.
+
+        Return (``char_dots.DotMeasure``, '') or (None, why not: no camera_info, no frame
+        within ``verify_timeout`` of wall time, no joint states). The frame's camera pose is
+        the joints' (at rest, retreated) through the rig and the robot-world calibration.
+        """
+        if self.rgb_camera is None:
+            return None, 'no rgb/camera_info'
+        names = JOINT_NAMES
+        if not all(name in self.joints_now for name in names):
+            return None, 'no joint states'
+        since = self._now()
+        waiter = FirstOf()
+        self._frame_waiters.append((since, waiter))
+        timer = self.create_timer(self.verify_timeout, lambda: waiter.offer(None),
+                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
+        try:
+            frame = await waiter
+        finally:
+            self._frame_waiters.remove((since, waiter))
+            self.destroy_timer(timer)
+        self._check()
+        if frame is None:
+            return None, f'no RGB frame within {self.verify_timeout:g} s'
+        pose = self.rig.forward(np.array([self.joints_now[name] for name in names]))
+        T_world_rgb = invert_transform(self.rig.parameters.T_robot_world) @ pose.T_robot_rgb
+        try:
+            return measure_in_image(image_to_numpy(frame), self.rgb_camera, T_world_rgb,
+                                    target, expected, neighbours, self.char_settings), ''
+        except (ImageConversionError, ValueError) as error:
+            return None, f'the frame cannot be measured: {error}'
+
+    def _on_frame(self, raw):
+        """Take a raw RGB frame: decoded only when a verification waits for it."""
+        if not self._frame_waiters:
+            return
+        message = deserialize_message(raw, Image)
+        stamp = stamp_to_seconds(message.header.stamp)
+        for since, waiter in list(self._frame_waiters):
+            if stamp >= since:
+                waiter.offer(message)
+
+    def _on_parameters_set(self, parameters):
+        """Take the parameters set at run time (``max_heating``, ``verify.*``)."""
+        for parameter in parameters:
+            if parameter.name == 'max_heating':
+                self.max_heating = float(parameter.value)
+            elif parameter.name == 'verify.min_diameter_ratio':
+                self.char_settings = replace(self.char_settings,
+                                             min_diameter_ratio=float(parameter.value))
+
+    def _on_rgb_info(self, message):
+        key = (tuple(message.k), tuple(message.d), message.width, message.height)
+        if key != self._rgb_info_key:
+            try:
+                self.rgb_camera = camera_from_info(message)
+            except ValueError:
+                self.rgb_camera = None
+            self._rgb_info_key = key
+
+    async def _heat_dot(self, goal_handle, feedback, index, target, n_p_target, cooling,
+                        dry_run, result, hot_next=False):
         """
         Burn one dot (Algorithm 1 lines 6-14); return its journal record's fields.
 

@@ -39,7 +39,7 @@ class CharSettings:
     """How char is told from wood and a dot judged (spot_detector's ``verify.*``)."""
 
     cell: float = 1.0e-4              # the world grid an RGB frame is resampled on [m]
-    dark_ratio: float = 0.4           # char: darker than this share of the bare wood [-]
+    dark_ratio: float = 0.6           # char: darker than this share of the bare wood [-]
     reference_reach: float = 0.006    # the bare wood's light is taken within this [m]
     reference_percentile: float = 90.0   # ... as this percentile of the grid's light [%]
     char_ratio: float = 0.05          # char's light / the bare wood's in the same light [-]

@@ -1,0 +1,30 @@
+"""
+What the RGB camera checks a planned dot against (issue 29, item 4).
+
+Its expected diameter, and the targets around it whose char is theirs. Pure Python: no rclpy.
+
+The expected burnt diameter is the plan's dot pitch (``dot_radius``, paper r_p: "a charred
+dot ~0.2 cm wide" at N_p 30), scaled by the square root of the dot's N_p target over the
+paper's 30 (a dot's area grows with N_p, paper Fig. 8d). The simulated world burns 1.40 mm
+at N_p 15 and 1.61 mm at N_p 20 (``test/test_painter.py``): 1.41 and 1.63 mm by this rule.
+Until the dot-size calibration (item 3) measures it, this is the plan's own figure.
+"""
+
+import math
+
+import numpy as np
+
+# targets within this many expected diameters of a dot are its neighbours
+NEIGHBOUR_REACH = 2.5
+PAPER_N_P = 30.0     # the paper's N_p target of a dot r_p wide
+
+
+def expected_dot(plan, index):
+    """Return (expected diameter [m], neighbouring targets (K, 2) [m]) of the plan's dot."""
+    parameters = plan.parameters
+    pitch = float(parameters.get('dot_radius') or 0.002)
+    expected = pitch * math.sqrt(max(float(plan.n_p_targets[index]), 1.0) / PAPER_N_P)
+    dots = np.asarray(plan.dots, dtype=float).reshape(-1, 2)
+    distance = np.hypot(*(dots - dots[index]).T)
+    near = (distance <= NEIGHBOUR_REACH * expected) & (np.arange(len(dots)) != index)
+    return expected, dots[near]
