@@ -312,7 +312,8 @@ def killed_driver_mid_dot(rig, label, y, x=0.074):
     (``device_silence`` of wall time) and retreats with the other device (a dead Dobot
     driver: the wrist turns the lens away; a dead servo driver: the arm alone lifts the lens
     straight up). Meanwhile the world, in lockstep with the drivers' joint states, holds its
-    time until it leaves the silent driver behind (``lockstep_timeout``). The driver is not
+    time until it leaves the silent driver behind (``lockstep_timeout``). No char grows after
+    (the char map 3 s of simulated time after the painting ended). The driver is not
     started again (a restarted driver went unheard by the painter for seconds, session 40):
     only a module's last test calls this, with the driver in its graph's ``may_die``.
     """
@@ -329,6 +330,11 @@ def killed_driver_mid_dot(rig, label, y, x=0.074):
     print(f'{label} killed: {result.message}')
     device = 'dobot' if label == 'dobot_driver' else 'servo'
     assert not result.success and device in result.message, result.message
+    # no char grows once the focus is off: the char 3 s of sim time later is the same
+    burnt = rig.charred_dots()
+    rig.wait_sim(3.0)
+    assert [round(d.area, 9) for d in rig.charred_dots()] == \
+        [round(d.area, 9) for d in burnt]
     return delay, result
 
 
