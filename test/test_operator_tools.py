@@ -374,13 +374,16 @@ def test_the_report_of_a_simulated_painting_matches_the_worlds_truth(painted_run
     summary = json.loads((run_dir / 'summary.json').read_text())
     assert summary['dots_planned'] == 3 and summary['dots_burnt'] == 3
     assert summary['dots_skipped'] == 0 and summary['dots_without_char'] == 0
-    # second method: each target's nearest charred dot in the world's dots.csv
+    # second method: each target's nearest charred dot in the world's dots.csv (the report
+    # measures the char map per target: the same pixels, but dots.csv rounds to 1 um)
+    assert summary['measured_per'] == 'target'
     charred = read_dots_csv(str(run_dir / 'dots.csv'))
     nearest = [np.min(np.linalg.norm(charred[:, :2] - target, axis=1)) for target in plan.dots]
-    assert summary['mean_placement_error_m'] == pytest.approx(np.mean(nearest), rel=1e-9)
+    assert summary['mean_placement_error_m'] == pytest.approx(np.mean(nearest), abs=1.5e-6)
     assert summary['mean_placement_error_m'] < 1e-3        # aimed with the true sun
     diameters = charred[:, 2]
-    assert summary['diameter_cv'] == pytest.approx(np.std(diameters) / np.mean(diameters))
+    assert summary['diameter_cv'] == pytest.approx(np.std(diameters) / np.mean(diameters),
+                                                   abs=1e-3)
     estimate = plan.time_estimate['total_s']
     actual = summary['painting_time_s']
     assert summary['plan_estimate_s'] == pytest.approx(estimate)

@@ -16,12 +16,22 @@ and writes beside them ``summary.json``, the plots (``thermal.png``, ``dwell.png
 and ``report.html``, self-contained (images inlined as data URIs). Without ``canvas.png``
 the last ``sim/canvas`` frame of the recording is written as ``canvas.png``.
 
-Placement error: each burnt dot's target is paired with one charred dot by a minimum-cost
+Per target (``measured_per`` ``target``), when the run directory holds the world's char map
+(``canvas_mask.png``, its extent from ``dots.csv``'s header) and ``plan.json``: each burnt
+dot is measured at its target in the char map as the painter's camera verdict measures it
+(``helio_perception.char_dots``: the char nearest the target, not the connected region, so
+dots 2 mm apart that touch are counted and sized one by one), against its expected diameter
+(``helio_control.dot_check``); a target without char of at least half of it counts as
+without char, the placement error is the char's centroid to the target, the diameters
+those of the targets with char. Otherwise (``measured_per`` ``connected region``): each
+burnt dot's target is paired with one charred dot of ``dots.csv`` by a minimum-cost
 one-to-one assignment (scipy's ``linear_sum_assignment``) within ``match_radius`` (2 dot
 pitches by default); a target with no charred dot inside it counts as missing. Diameter
-coefficient of variation: standard deviation / mean of the matched charred dots'
-diameters. Painting time: the result's duration (the graph's clock: simulated seconds in
-simulation); the plan's estimate is compared with it as (estimate - actual) / actual.
+coefficient of variation: standard deviation / mean of those diameters. The painter's own
+evidence, the RGB camera's verdict per dot (the journal's ``verdict``), is counted beside
+it (``dots_verified_by_camera``, ``camera_diameter_*``). Painting time: the result's
+duration (the graph's clock: simulated seconds in simulation); the plan's estimate is
+compared with it as (estimate - actual) / actual.
 
 Pure Python (numpy, OpenCV, matplotlib with the Agg backend, the bag reader): no rclpy
 graph is needed, the bag's messages are decoded with the installed message classes.
@@ -34,9 +44,13 @@ import json
 import math
 import os
 
+import re
+
 import cv2
 from helio_control.bag_files import BagError, decode_messages, read_topics, recover_bag
+from helio_control.dot_check import expected_dot
 from helio_control.run_journal import read_journal
+from helio_perception.char_dots import measure_in_mask
 import numpy as np
 
 PLOTS = ('overlay.png', 'thermal.png', 'dwell.png', 'placement.png', 'sun.png')
@@ -69,6 +83,42 @@ def read_dots_csv(path):
             except ValueError:
                 raise ReportError(f'{path}: not a dots.csv row: {line!r}') from None
     return np.asarray(rows, float).reshape(-1, 4)
+
+
+# dots.csv's header: the extent and pixel of canvas.png and canvas_mask.png
+EXTENT = re.compile(r'span x (-?[0-9.]+)\.\.(-?[0-9.]+) m, y (-?[0-9.]+)\.\.(-?[0-9.]+) m, '
+                    r'([0-9.]+) m/px')
+
+
+def read_char_map(run_dir):
+    """
+    Return (charred mask, rows from y_min; origin (x, y) [m]; cell [m]) of a run, or None.
+
+    From the world's ``canvas_mask.png`` (255 bare, 0 charred, row 0 at y_max) and the
+    extent in ``dots.csv``'s header; None when either is missing.
+    """
+    mask_path, csv_path = (os.path.join(run_dir, name) for name in ('canvas_mask.png',
+                                                                    'dots.csv'))
+    if not (os.path.isfile(mask_path) and os.path.isfile(csv_path)):
+        return None
+    with open(csv_path, encoding='utf-8') as stream:
+        found = EXTENT.search(stream.readline())
+    mask = cv2.imread(mask_path, cv2.IMREAD_GRAYSCALE)
+    if found is None or mask is None:
+        return None
+    x_min, _, y_min, _, cell = (float(v) for v in found.groups())
+    return np.flipud(mask) <= 127, (x_min, y_min), cell
+
+
+def measure_targets(char_map, plan, dots):
+    """Return per journal dot its ``char_dots.DotMeasure`` in the char map (see the module)."""
+    charred, origin, cell = char_map
+    measures = []
+    for dot in dots:
+        expected, neighbours = expected_dot(plan, dot.index)
+        measures.append(measure_in_mask(charred, origin, cell, dot.target, expected,
+                                        neighbours))
+    return measures
 
 
 def match_targets(targets, dots, match_radius):
@@ -294,6 +344,18 @@ def _finite_or_none(value):
     return float(value) if value is not None and math.isfinite(value) else None
 
 
+def camera_figures(dots):
+    """Return the summary's figures of the painter's own RGB verdicts (journal ``verdict``)."""
+    seen = [d.measured_diameter for d in dots if d.verdict == 'charred']
+    return {
+        'dots_verified_by_camera': len(seen),
+        'dots_camera_not_charred': sum(d.verdict == 'not charred' for d in dots),
+        'dots_not_verified': sum(d.outcome != 'skipped' and not d.verdict for d in dots),
+        'camera_diameter_mean_m': float(np.mean(seen)) if seen else None,
+        'camera_diameter_cv': float(np.std(seen) / np.mean(seen)) if len(seen) > 1 else None,
+    }
+
+
 def make_report(run_dir, match_radius=None):
     """Write the report of `run_dir` (see the module docstring); return a Report."""
     if not os.path.isdir(run_dir):
@@ -324,7 +386,18 @@ def make_report(run_dir, match_radius=None):
     charred = read_dots_csv(dots_csv) if os.path.isfile(dots_csv) else np.zeros((0, 4))
     burnt = [i for i, d in enumerate(dots) if d.outcome == 'burnt']
     pairs = [(None, math.nan)] * len(dots)
-    if len(charred):
+    char_map = read_char_map(run_dir) if plan is not None else None
+    components = len(charred)
+    if char_map is not None:        # per target: each its char, centroid and diameter
+        measures = measure_targets(char_map, plan, [dots[i] for i in burnt])
+        rows = []
+        for i, measure in zip(burnt, measures):
+            if measure.diameter > 0.0:
+                pairs[i] = (len(rows), measure.offset) if measure.charred else (None, math.nan)
+                rows.append([*measure.centre, measure.diameter,
+                             math.pi * measure.diameter ** 2 / 4.0])
+        charred = np.asarray(rows, float).reshape(-1, 4)
+    elif len(charred):
         matched = match_targets([targets[i] for i in burnt], charred[:, :2], match_radius)
         for i, pair in zip(burnt, matched):
             pairs[i] = pair
@@ -343,8 +416,10 @@ def make_report(run_dir, match_radius=None):
         'dots_burnt': sum(d.outcome == 'burnt' for d in dots),
         'dots_skipped': sum(d.outcome == 'skipped' for d in dots),
         'dots_failed': sum(d.outcome == 'failed' for d in dots),
-        'charred_dots_seen': int(len(charred)) if os.path.isfile(dots_csv) else None,
-        'dots_without_char': sum(pairs[i][0] is None for i in burnt) if len(charred) else None,
+        'measured_per': 'target' if char_map is not None else 'connected region',
+        'charred_dots_seen': int(components) if os.path.isfile(dots_csv) else None,
+        'dots_without_char': sum(pairs[i][0] is None for i in burnt)
+        if len(charred) or char_map is not None else None,
         'mean_placement_error_m': _finite_or_none(np.mean(finite_errors))
         if finite_errors else None,
         'max_placement_error_m': _finite_or_none(max(finite_errors)) if finite_errors else None,
@@ -360,6 +435,7 @@ def make_report(run_dir, match_radius=None):
                                                  'burnt'])) if burnt else None,
         'journal_truncated': journal.truncated,
     }
+    summary.update(camera_figures(dots))
     if series['sun'] and series['truth']:
         data = np.asarray(series['sun'], float)
         truth = np.asarray(series['truth'], float)
