@@ -1,6 +1,8 @@
 """
 Charred dots measured per target in frames the simulated world renders (issue 29, item 4).
 
+Last, the expected size a dot is judged against (``dot_check``).
+
 The world's char is set as discs of known size at known places (the camera renders char
 wherever the char map has it), at 2 mm pitch (touching) and 3 mm pitch, a target left bare,
 a dot far too small; the RGB frame is taken with the lens retreated 3 cm over each target
@@ -10,6 +12,8 @@ world's char map measured the same way per target (``measure_in_mask``): no ROS.
 
 from dataclasses import replace
 
+from helio_control.dot_check import expected_dot
+from helio_control.plan import load_plan_options, plan_dots
 from helio_drivers.sim.truth import true_sun_focus_joints
 from helio_drivers.sim.world import SimSettings, SimWorld
 from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
@@ -95,3 +99,13 @@ def test_a_target_out_of_the_frame_is_not_charred_and_says_why(world):
 def test_settings_that_cannot_measure_are_refused():
     with pytest.raises(ValueError):
         CharSettings(dark_ratio=0.0)
+
+
+def test_a_dots_expected_size_follows_its_n_p_target_and_its_neighbours_are_the_plans():
+    targets = np.array([[0.06 + 0.002 * i, 0.08] for i in range(6)] + [[0.06, 0.1]])
+    plan = plan_dots(targets, replace(load_plan_options(), n_p_target=15), None, None)
+    index = int(np.argmin(np.hypot(*(plan.dots - [0.064, 0.08]).T)))
+    expected, neighbours = expected_dot(plan, index)
+    # the world burns 1.40 mm at N_p 15 (test/test_painter.py): 2 mm x sqrt(15 / 30)
+    assert expected == pytest.approx(0.002 * np.sqrt(0.5))
+    assert sorted(np.round(neighbours[:, 0], 4)) == [0.062, 0.066]     # within 2.5 x 1.41 mm
