@@ -29,6 +29,7 @@ setup(
             'helio = helio_control.cli:main',
             'recorder = helio_control.recorder:main',
             'replayer = helio_control.replay:main',
+            'view_bridge = helio_control.view_bridge:main',
         ],
     },
 )

@@ -1,0 +1,131 @@
+"""
+The live Foxglove view (issue 33): the view bridge beside the simulated graph painting.
+
+One graph (the painter's nodes, the world at 6x). A first goal paints one dot with no bridge
+running (it also calibrates robot-world and sweeps for the sun, as a painting's start does).
+Then the bridge starts (port 0: the OS picks one) and three clients connect over the
+Foxglove WebSocket protocol (``foxglove_ws``, written from the protocol's text): one reads
+everything, one subscribes and never reads again (a slow client), one subscribes and
+vanishes. A second goal paints one dot, a third another. The reading client must receive
+well-formed messages of the advertised schemas on the annotated RGB, thermal and scene
+channels while those dots are painted, and the painter's per-dot figures (dwell and the time
+from the move to the cool-down, simulated seconds, from its journal) must stay within noise
+of the dot without the bridge. The figures are printed.
+"""
+
+import json
+import re
+import time
+
+from conftest import graph_of_processes
+from foxglove_ws import FoxgloveClient
+from geometry_msgs.msg import Point
+from helio_control.bringup import node_environment
+from helio_control.run_journal import read_journal
+from helio_control.view_scene import schema_errors
+from helio_msgs.action import PaintPattern
+from helio_optics.node_kit.processes import NodeProcess
+import pytest
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import Image
+
+NODES = ('sim_world', 'dobot_driver', 'servo_driver', 'spot_detector', 'thermal_monitor',
+         'sun_estimator', 'lens_planner', 'painter')
+WORLD = {'sim_world': {'real_time_factor': 6.0, 'flux_rays': 20000}}
+CHECKED = ('/view/rgb/annotations', '/view/thermal/annotations', '/view/scene',
+           '/rgb/image_raw', '/thermal/image_raw')
+TIMEOUT = 600.0
+# small dots, the window cooling rule: the view is under test, not the charring (the
+# painter's own tests burn to the paper's N_p 30)
+N_P_TARGET = 15
+
+
+def start_bridge(tmp_path, timeout=60.0):
+    """Start the view bridge process on a free port; return (process, port)."""
+    bridge = NodeProcess('helio_control', 'view_bridge', {'port': 0, 'use_sim_time': True},
+                         log_dir=str(tmp_path / 'logs'), env=node_environment())
+    bridge.start()
+    deadline = time.monotonic() + timeout
+    while True:
+        with open(bridge.log_path) as stream:
+            found = re.search(r'ws://127\.0\.0\.1:(\d+)', stream.read())
+        if found:
+            return bridge, int(found.group(1))
+        assert bridge.alive(), f'view_bridge exited: {bridge.tail()}'
+        assert time.monotonic() < deadline, 'view_bridge did not start its server'
+        time.sleep(0.05)       # polling the log file for the port (no event to wait on)
+
+
+def paint_dot(graph, client, run_dir, x, y):
+    """Paint one dot; return (its journal record, the goal's wall time [s])."""
+    goal = PaintPattern.Goal(run_dir=str(run_dir), fresh=True, n_p_target=N_P_TARGET,
+                             cooling='window', points=[Point(x=x, y=y, z=0.0)])
+    started = time.monotonic()
+    result = graph.run_goal(client, goal, timeout=TIMEOUT).result
+    wall = time.monotonic() - started
+    assert result.success, result.message
+    (dot,) = read_journal(str(run_dir / 'journal.jsonl')).dots
+    return dot, wall
+
+
+def well_formed(client, topic):
+    """Check every message of `topic` against its advertised schema; return them."""
+    channel = client.channels[topic]
+    messages = client.decoded(topic)
+    if channel['encoding'] == 'json':
+        assert channel['schemaEncoding'] == 'jsonschema'
+        schema = json.loads(channel['schema'])
+        for message in messages:
+            assert schema_errors(message, schema) == []
+    else:
+        assert (channel['encoding'], channel['schemaEncoding']) == ('cdr', 'ros2msg')
+        for message in messages:
+            image = deserialize_message(message, Image)
+            assert image.width > 0 and len(image.data) == image.step * image.height
+    return messages
+
+
+def test_the_bridge_streams_the_painting_and_leaves_its_timing_alone(tmp_path):
+    with graph_of_processes(tmp_path, NODES, WORLD) as (_, graph):
+        painter = graph.action_client(PaintPattern, 'paint', 120.0)
+        alone, alone_wall = paint_dot(graph, painter, tmp_path / 'alone', 0.05, 0.05)
+        bridge, port = start_bridge(tmp_path)
+        reader = FoxgloveClient(port, CHECKED)
+        slow = FoxgloveClient(port, CHECKED, read=False)
+        vanished = FoxgloveClient(port, CHECKED)
+        try:
+            assert all(c.subscribed.wait(30.0) for c in (reader, slow, vanished))
+            vanished.close()
+            watched, watched_wall = paint_dot(graph, painter, tmp_path / 'watched', 0.06, 0.05)
+            reader.wait_for({'/view/rgb/annotations': 1, '/view/thermal/annotations': 1,
+                             '/view/scene': 1}, 60.0)
+            counts = {topic: len(reader.messages[topic]) for topic in CHECKED}
+        finally:
+            for client in (reader, slow):
+                client.close()
+            bridge.stop()
+        assert bridge.returncode() in (0, -2), bridge.tail()
+
+    rgb = well_formed(reader, '/view/rgb/annotations')
+    thermal = well_formed(reader, '/view/thermal/annotations')
+    scenes = well_formed(reader, '/view/scene')
+    well_formed(reader, '/rgb/image_raw')
+    well_formed(reader, '/thermal/image_raw')
+    # what was drawn: the marker outline on the RGB image, the hottest point on the thermal,
+    # the panel, marker and the lens and camera frames in the scene
+    assert any(message['points'] for message in rgb)
+    assert all(message['circles'] for message in thermal)
+    ids = {entity['id'] for scene in scenes for entity in scene['entities']}
+    assert {'panel', 'marker', 'targets', 'lens', 'rgb_camera', 'thermal_camera',
+            'sun_estimate'} <= ids
+    # annotations are stamped as the image they belong to
+    image_stamps = {stamp for stamp, _ in reader.messages['/rgb/image_raw']}
+    assert {stamp for stamp, _ in reader.messages['/view/rgb/annotations']} <= image_stamps
+
+    print(f'\nmessages received per channel while a dot was painted: {counts}')
+    for name, dot, wall in (('no bridge', alone, alone_wall),
+                            ('bridge, 3 clients (1 slow, 1 gone)', watched, watched_wall)):
+        print(f'{name}: dwell {dot.dwell:.2f} s, move to cool-down {dot.end - dot.start:.2f} s '
+              f'(simulated), goal {wall:.1f} s wall')
+    assert watched.dwell == pytest.approx(alone.dwell, rel=0.5)
+    assert watched.end - watched.start == pytest.approx(alone.end - alone.start, rel=0.5)
