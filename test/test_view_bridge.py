@@ -11,22 +11,34 @@ well-formed messages of the advertised schemas on the annotated RGB, thermal and
 channels while those dots are painted, and the painter's per-dot figures (dwell and the time
 from the move to the cool-down, simulated seconds, from its journal) must stay within noise
 of the dot without the bridge. The figures are printed.
+
+The recorder records the whole run, as ``helio paint`` does: the bag opens with ``rosbags``
+and ``mcap``'s reader, and the view's drawings (``view.mcap`` in the bag directory) hold
+the annotation and scene topics. The shipped layout (config/foxglove/helio.json) names only
+topics that both the live bridge and the recording carry.
 """
 
+import glob
 import json
+import os
+from pathlib import Path
 import re
 import time
 
-from conftest import graph_of_processes
+from conftest import graph_of_processes, REPO
 from foxglove_ws import FoxgloveClient
 from geometry_msgs.msg import Point
+from helio_control.bag_files import bag_file, VIEW_FILE
 from helio_control.bringup import node_environment
+from helio_control.recorder import Recorder
 from helio_control.run_journal import read_journal
 from helio_control.view_scene import schema_errors
 from helio_msgs.action import PaintPattern
 from helio_optics.node_kit.processes import NodeProcess
+from mcap.reader import make_reader
 import pytest
 from rclpy.serialization import deserialize_message
+from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import Image
 
 NODES = ('sim_world', 'dobot_driver', 'servo_driver', 'spot_detector', 'thermal_monitor',
@@ -35,6 +47,7 @@ WORLD = {'sim_world': {'real_time_factor': 6.0, 'flux_rays': 20000}}
 CHECKED = ('/view/rgb/annotations', '/view/thermal/annotations', '/view/scene',
            '/rgb/image_raw', '/thermal/image_raw')
 TIMEOUT = 600.0
+LAYOUT = os.path.join(REPO, 'config', 'foxglove', 'helio.json')
 # small dots, the window cooling rule: the view is under test, not the charring (the
 # painter's own tests burn to the paper's N_p 30)
 N_P_TARGET = 15
@@ -86,8 +99,11 @@ def well_formed(client, topic):
 
 
 def test_the_bridge_streams_the_painting_and_leaves_its_timing_alone(tmp_path):
+    bag = str(tmp_path / 'recording')
     with graph_of_processes(tmp_path, NODES, WORLD) as (_, graph):
         painter = graph.action_client(PaintPattern, 'paint', 120.0)
+        recorder = Recorder(bag, use_sim_time=True, log_dir=str(tmp_path / 'logs'),
+                            chunk_period=0.5, env=node_environment()).start(60.0)
         alone, alone_wall = paint_dot(graph, painter, tmp_path / 'alone', 0.05, 0.05)
         bridge, port = start_bridge(tmp_path)
         reader = FoxgloveClient(port, CHECKED)
@@ -104,6 +120,7 @@ def test_the_bridge_streams_the_painting_and_leaves_its_timing_alone(tmp_path):
             for client in (reader, slow):
                 client.close()
             bridge.stop()
+            recorder.stop()
         assert bridge.returncode() in (0, -2), bridge.tail()
 
     rgb = well_formed(reader, '/view/rgb/annotations')
@@ -129,3 +146,50 @@ def test_the_bridge_streams_the_painting_and_leaves_its_timing_alone(tmp_path):
               f'(simulated), goal {wall:.1f} s wall')
     assert watched.dwell == pytest.approx(alone.dwell, rel=0.5)
     assert watched.end - watched.start == pytest.approx(alone.end - alone.start, rel=0.5)
+
+    recorded = check_recording(bag)
+    assert layout_topics() <= recorded
+    assert layout_topics() <= set(reader.channels)
+
+
+def layout_topics(path=LAYOUT):
+    """Return the topics the Foxglove layout names (keys and values starting with '/')."""
+    topics = set()
+
+    def walk(value):
+        if isinstance(value, dict):
+            for key, item in value.items():
+                walk(key)
+                walk(item)
+        elif isinstance(value, list):
+            for item in value:
+                walk(item)
+        elif isinstance(value, str) and value.startswith('/'):
+            topics.add(value.split('.')[0])     # a plot path: /topic.field
+    with open(path) as stream:
+        walk(json.load(stream))
+    return topics
+
+
+def check_recording(bag):
+    """Open the bag with rosbags and mcap, the view file with mcap; return all topics."""
+    with AnyReader([Path(bag)]) as reader:
+        topics = {connection.topic for connection in reader.connections}
+        images = [c for c in reader.connections if c.topic == '/rgb/image_raw']
+        for connection, _, raw in reader.messages(connections=images):
+            assert reader.deserialize(raw, connection.msgtype).width > 0
+    with open(bag_file(bag), 'rb') as stream:
+        assert {c.topic for c in make_reader(stream).get_summary().channels.values()} \
+            == topics
+    (view,) = glob.glob(os.path.join(bag, VIEW_FILE))
+    drawn = {}
+    with open(view, 'rb') as stream:
+        reader = make_reader(stream)
+        for schema, channel, message in reader.iter_messages():
+            assert (channel.message_encoding, schema.encoding) == ('json', 'jsonschema')
+            assert schema_errors(json.loads(message.data), json.loads(schema.data)) == []
+            drawn[channel.topic] = drawn.get(channel.topic, 0) + 1
+    print(f'recording: {len(topics)} ROS topics; view drawings {drawn}')
+    assert {'/view/rgb/annotations', '/view/thermal/annotations', '/view/scene',
+            '/view/metrics'} <= set(drawn)
+    return topics | set(drawn)

@@ -505,3 +505,67 @@ def recover_bag(directory):
                                             min(times, default=0), max(times, default=0),
                                             'zstd'))
     return len(messages)
+
+
+# ---------------------------------------------------------------------------- JSON beside
+VIEW_FILE = 'view.mcap'
+
+
+class JsonMcapWriter:
+    """
+    An MCAP file of JSON messages with JSON schemas (Foxglove's own schemas), beside a bag.
+
+    MCAP allows other encodings than ROS 2's, but rosbags refuses a file that holds a
+    ``jsonschema`` schema (KeyError 'jsonschema' in its MCAP index reader, rosbags 0.11.9),
+    so these channels go into a second file of the bag directory (``VIEW_FILE``), which
+    metadata.yaml does not name: rosbag2 and rosbags read the bag, Foxglove opens both files
+    together, ``mcap`` reads either. Chunked like the bag: a chunk is closed after
+    `chunk_period` seconds.
+    """
+
+    def __init__(self, path, chunk_size=1 << 20, chunk_period=2.0, compression='zstd',
+                 clock=time.monotonic):
+        """Create the file."""
+        self.path = path
+        self.chunk_period = chunk_period
+        self._clock = clock
+        self._stream = open(path, 'wb')
+        self._writer = Writer(self._stream, chunk_size=chunk_size,
+                              compression=COMPRESSIONS[compression], index_types=IndexType.ALL,
+                              use_statistics=True, use_summary_offsets=True)
+        self._writer.start(profile='', library='helio_control.bag_files (mcap)')
+        self._schemas, self._channels = {}, {}
+        self.counts = {}
+        self._chunk_opened = None
+        self.closed = False
+
+    def add_topic(self, name, schema_name, json_schema):
+        """Register a topic of JSON messages with its schema (bytes of a JSON schema)."""
+        if name in self._channels:
+            return
+        if schema_name not in self._schemas:
+            self._schemas[schema_name] = self._writer.register_schema(
+                name=schema_name, encoding='jsonschema', data=bytes(json_schema))
+        self._channels[name] = self._writer.register_channel(
+            topic=name, message_encoding='json', schema_id=self._schemas[schema_name])
+        self.counts[name] = 0
+
+    def write(self, topic, log_time_ns, data):
+        """Append one message (JSON bytes) of a registered topic."""
+        self._writer.add_message(channel_id=self._channels[topic], log_time=int(log_time_ns),
+                                 publish_time=int(log_time_ns), data=bytes(data),
+                                 sequence=sum(self.counts.values()))
+        self.counts[topic] += 1
+        if self._chunk_opened is None:
+            self._chunk_opened = self._clock()
+        if self._clock() - self._chunk_opened >= self.chunk_period:
+            self._writer.flush()         # close the chunk (as BagWriter.flush)
+            self._stream.flush()
+            self._chunk_opened = None
+
+    def close(self):
+        """Finish the file (summary, indexes, footer)."""
+        if not self.closed:
+            self.closed = True
+            self._writer.finish()
+            self._stream.close()

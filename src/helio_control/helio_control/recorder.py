@@ -24,19 +24,23 @@ Stopping it (SIGINT) closes the bag; a SIGKILL loses at most the last chunk
 """
 
 import atexit
+import json
 import os
 import queue
 import threading
 import time
 
 from helio_control.bag_files import BagError, BagWriter, COMPRESSIONS, message_class
-from helio_control.bag_files import qos_profile_dict, TopicInfo
+from helio_control.bag_files import JsonMcapWriter, qos_profile_dict, TopicInfo, VIEW_FILE
+from helio_control.view_model import cdr_stamp_ns, INPUTS, output_schema_bytes, OUTPUTS
+from helio_control.view_model import RGB_IMAGE, THERMAL_IMAGE
 from helio_optics.node_kit.parameters import declare, parameter_descriptor
 from helio_optics.node_kit.processes import NodeProcess
 from helio_optics.node_kit.runner import run_node
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 
 CAMERA_TYPES = ('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage',
                 'sensor_msgs/msg/CameraInfo')
@@ -125,6 +129,15 @@ class RecorderNode(Node):
         self.bag = BagWriter(output_dir, chunk_size, chunk_period, compression,
                              clock=time.monotonic)
         atexit.register(self.bag.close)   # an interrupt before spin still closes the bag
+        view_file = declare(self, 'view_file', VIEW_FILE, 'File of the bag directory the '
+                            'drawings of the Foxglove view go to, beside the bag (empty: '
+                            'none).')
+        self.view = None
+        if view_file:
+            from helio_control.view_bridge import declare_view_model
+            self.view = ViewRecording(self, declare_view_model(self), JsonMcapWriter(
+                os.path.join(output_dir, view_file), chunk_size, chunk_period, compression))
+            atexit.register(self.view.writer.close)
         self.failure = ''
         self._queue = queue.Queue()
         self._recorded = {}
@@ -210,10 +223,21 @@ class RecorderNode(Node):
                     self.bag.add_topic(item[1])
                 else:
                     self.bag.write(item[1], item[2], item[3])
+                    if self.view is not None:
+                        self._draw(item[1], item[2], item[3])
             except (OSError, BagError, ValueError) as error:
                 if not self.failure:
                     self.failure = f'writing {self.bag.path} failed: {error}'
                     self.get_logger().fatal(self.failure)
+
+    def _draw(self, topic, log_time_ns, data):
+        try:
+            self.view.take(topic, log_time_ns, data)
+        except Exception as error:   # noqa: B902 - the drawings must never end the recording
+            self.get_logger().error(f'the view drawings stop ({type(error).__name__}: '
+                                    f'{error}); the bag goes on')
+            self.view.writer.close()
+            self.view = None
 
     def destroy_node(self):
         """Write what is queued, close the bag (summary and footer), then destroy."""
@@ -223,10 +247,44 @@ class RecorderNode(Node):
             self.bag.close()
         except (OSError, ValueError) as error:
             self.failure = self.failure or f'closing {self.bag.path} failed: {error}'
+        if self.view is not None:
+            self.view.writer.close()
         counts = {t.name: t.message_count for t in self.bag.topics.values()}
         self.get_logger().info(f'bag closed: {sum(counts.values())} messages on '
                                f'{len(counts)} topics in {self.bag.directory}')
         return super().destroy_node()
+
+
+class ViewRecording:
+    """
+    The Foxglove view's drawings of the recorded messages (``view_model``), into a JSON MCAP.
+
+    Fed by the writer thread with what is recorded (camera topics decimated as in the bag):
+    inputs update the model; each recorded RGB or thermal image writes the drawings the live
+    bridge would send with it, logged at the image's time and stamped with its stamp.
+    """
+
+    def __init__(self, node, model, writer):
+        """Resolve the model's topics in `node`'s namespace; register the outputs."""
+        self.model, self.writer = model, writer
+        self.inputs = {node.resolve_topic_name(topic): (topic, message_class(type_name))
+                       for topic, (type_name, _) in INPUTS.items()}
+        self.images = {node.resolve_topic_name(t): t for t in (RGB_IMAGE, THERMAL_IMAGE)}
+        prefix = node.get_namespace().rstrip('/')
+        self.outputs = {topic: prefix + topic for topic in OUTPUTS}
+        for topic, schema_name in OUTPUTS.items():
+            writer.add_topic(self.outputs[topic], schema_name, output_schema_bytes(schema_name))
+
+    def take(self, topic, log_time_ns, data):
+        """Take one recorded message (raw CDR) of `topic` (absolute name)."""
+        if topic in self.inputs:
+            name, cls = self.inputs[topic]
+            self.model.feed(name, deserialize_message(data, cls))
+        elif topic in self.images:
+            for output, message in self.model.outputs_for_image(self.images[topic],
+                                                                cdr_stamp_ns(data)):
+                self.writer.write(self.outputs[output], log_time_ns,
+                                  json.dumps(message).encode())
 
 
 class Recorder:

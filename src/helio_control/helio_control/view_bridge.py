@@ -27,9 +27,8 @@ import time
 
 import foxglove
 from helio_control.bag_files import full_type_name, message_class, message_definition
-from helio_control.view_model import cdr_stamp_ns, INPUTS, metrics_schema_bytes, OUTPUTS
-from helio_control.view_model import RGB_IMAGE, THERMAL_IMAGE, VIEW_METRICS, ViewModel
-from helio_control.view_scene import schema_bytes
+from helio_control.view_model import cdr_stamp_ns, INPUTS, output_schema_bytes, OUTPUTS
+from helio_control.view_model import RGB_IMAGE, THERMAL_IMAGE, ViewModel
 from helio_optics.node_kit.deployment import declare_rig
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
@@ -50,6 +49,16 @@ NEWEST_LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
+def declare_view_model(node):
+    """Declare the view's parameters on `node` (marker, panel, rig); return its ViewModel."""
+    marker_side = declare(node, 'marker_side', 0.04, 'ArUco marker black square, as the '
+                          "spot detector's [m].", 0.001, 1.0)
+    panel_extent = declare(node, 'panel_extent', [-0.04, 0.16, -0.04, 0.16], 'The wood '
+                           'around the marker: x0, x1, y0, y1 in the world frame [m].')
+    rig, _ = declare_rig(node)
+    return ViewModel(rig, marker_side, panel_extent)
+
+
 def ros_channel(topic, type_name, context=None):
     """Return a foxglove Channel carrying a ROS 2 type as CDR (schema: its ros2msg text)."""
     type_name = full_type_name(type_name)
@@ -60,8 +69,8 @@ def ros_channel(topic, type_name, context=None):
 
 def json_channel(topic, schema_name, context=None):
     """Return a foxglove Channel of JSON messages with their JSON schema."""
-    data = metrics_schema_bytes() if schema_name == VIEW_METRICS else schema_bytes(schema_name)
-    schema = foxglove.Schema(name=schema_name, encoding='jsonschema', data=data)
+    schema = foxglove.Schema(name=schema_name, encoding='jsonschema',
+                             data=output_schema_bytes(schema_name))
     return foxglove.Channel(topic, schema=schema, message_encoding='json', context=context)
 
 
@@ -85,12 +94,7 @@ class ViewBridgeNode(Node):
                                    'two thermal images forwarded [s].', 0.0, 60.0)}
         backlog = declare(self, 'message_backlog_size', 16, 'Messages queued per client; a '
                           'slow client loses the oldest [-].', 1, 1024)
-        marker_side = declare(self, 'marker_side', 0.04, 'ArUco marker black square, as the '
-                              "spot detector's [m].", 0.001, 1.0)
-        panel_extent = declare(self, 'panel_extent', [-0.04, 0.16, -0.04, 0.16], 'The wood '
-                               'around the marker: x0, x1, y0, y1 in the world frame [m].')
-        rig, _ = declare_rig(self)
-        self.model = ViewModel(rig, marker_side, panel_extent)
+        self.model = declare_view_model(self)
         self.server = foxglove.start_server(name='helio', host=host, port=port,
                                             message_backlog_size=backlog)
         self.port = self.server.port

@@ -19,8 +19,8 @@ import math
 
 from helio_control.view_scene import ground_circle, IMAGE_ANNOTATIONS, project_to_image
 from helio_control.view_scene import ray_entity, ray_line, rgb_annotations, SCENE_UPDATE
-from helio_control.view_scene import scene_update, SUN_TRUTH_COLOUR, thermal_annotations
-from helio_control.view_scene import time_dict
+from helio_control.view_scene import scene_update, schema_bytes, SUN_TRUTH_COLOUR
+from helio_control.view_scene import thermal_annotations, time_dict
 from helio_optics.geometry import invert_transform
 from helio_optics.node_kit.conversions import camera_from_info, pose_to_matrix
 from helio_optics.node_kit.conversions import stamp_to_nanoseconds
@@ -58,9 +58,10 @@ METRICS_SCHEMA = {'type': 'object', 'properties': {
 RAY_LENGTH = 0.25               # drawn length of a sun ray, ending on the focus [m]
 
 
-def metrics_schema_bytes():
-    """Return the JSON schema of ``/view/metrics`` as UTF-8 bytes."""
-    return json.dumps(METRICS_SCHEMA).encode()
+def output_schema_bytes(schema_name):
+    """Return the JSON schema (UTF-8 bytes) of an ``OUTPUTS`` schema name."""
+    return json.dumps(METRICS_SCHEMA).encode() if schema_name == VIEW_METRICS \
+        else schema_bytes(schema_name)
 
 
 class ViewModel:
