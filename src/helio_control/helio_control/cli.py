@@ -3,12 +3,13 @@ The ``helio`` command: run the graph, paint, record, replay, report.
 
 ::
 
-    helio sim [--real-time-factor X] [--out DIR] [--nodes ...] [--set NODE.PARAM=VALUE]
-    helio rig --dobot-port PORT|auto --servo-port PORT [--rgb-camera PKG/EXE] ...
+    helio sim [--real-time-factor X] [--out DIR] [--nodes ...] [--set NODE.PARAM=VALUE] [--view]
+    helio rig --dobot-port PORT|auto --servo-port PORT [--rgb-camera PKG/EXE] ... [--view]
     helio preview PICTURE --out DIR [options]       (no graph needed)
-    helio paint PICTURE [goal options] [--out DIR] [--sim [--set NODE.PARAM=VALUE]]
+    helio paint PICTURE [goal options] [--out DIR] [--sim [--set NODE.PARAM=VALUE]] [--view]
     helio record --out DIR [--camera-decimation N] [--sim-time] | --recover BAG
-    helio replay BAG [--rate R] [--delay S] [--exclude TOPIC ...]
+    helio replay BAG [--rate R] [--delay S] [--exclude TOPIC ...] [--view]
+    helio view [--port P] [--namespace NS]           (the live Foxglove view of a graph)
     helio report RUN_DIR
     helio print marker|board --out FILE.png|pdf [--side M] ...   (a sheet to print at 1:1)
     helio udev [--install]                           (the serial devices' udev rule)
@@ -208,8 +209,8 @@ def command_sim(arguments):
     if arguments.out:
         world.setdefault('output_dir', os.path.abspath(arguments.out))
     port_dir = arguments.port_dir or tempfile.mkdtemp(prefix='helio_sim_ports_')
-    return _supervise(arguments, 'sim',
-                      lambda: simulated_graph(port_dir, arguments.nodes, overrides))
+    return _supervise(arguments, 'sim', lambda: _with_view(
+        arguments, simulated_graph(port_dir, arguments.nodes, overrides), sim_time=True))
 
 
 def command_rig(arguments):
@@ -230,8 +231,47 @@ def command_rig(arguments):
             parameters = _overrides([f'{kind}.{s}' for s in
                                      getattr(arguments, f'{kind}_camera_param') or ()])
             cameras.append(CameraSpec(kind, driver, parameters.get(kind, {})))
-    return _supervise(arguments, 'rig', lambda: hardware_graph(
-        dobot_port, arguments.servo_port, cameras, arguments.nodes, _overrides(arguments.set)))
+    return _supervise(arguments, 'rig', lambda: _with_view(arguments, hardware_graph(
+        dobot_port, arguments.servo_port, cameras, arguments.nodes, _overrides(arguments.set)),
+        sim_time=False))
+
+
+def _with_view(arguments, specs, sim_time):
+    """Return the graph's node specs, with the Foxglove view bridge when --view asks."""
+    if not arguments.view:
+        return specs
+    from helio_control.bringup import NodeSpec
+    print(f'[helio] Foxglove view: ws://127.0.0.1:{arguments.view_port} (README, "Watching '
+          'a painting")', file=sys.stderr)
+    return [*specs, NodeSpec('helio_control', 'view_bridge', 'view_bridge.yaml',
+                             {'port': arguments.view_port}, sim_time=sim_time)]
+
+
+def _view_process(arguments, log_dir, sim_time):
+    """Return the started view bridge process when --view asks, else None."""
+    if not getattr(arguments, 'view', False):
+        return None
+    from helio_control.bringup import interrupts_deferred, node_environment
+    from helio_optics.node_kit.processes import NodeProcess
+    process = NodeProcess('helio_control', 'view_bridge', {
+        'port': arguments.view_port, 'use_sim_time': sim_time},
+        namespace=arguments.namespace, log_dir=log_dir, env=node_environment())
+    with interrupts_deferred():
+        process.start()
+    print(f'[helio] Foxglove view: ws://127.0.0.1:{arguments.view_port} (log '
+          f'{process.log_path})', file=sys.stderr)
+    return process
+
+
+def command_view(arguments):
+    """Run the Foxglove view bridge in this process until Ctrl-C."""
+    from helio_control.view_bridge import ViewBridgeNode
+    _run_node_in_process(ViewBridgeNode, {'port': arguments.port, 'host': arguments.host,
+                                          'use_sim_time': arguments.sim_time},
+                         arguments.namespace)
+    if ViewBridgeNode.stuck:
+        os._exit(EXIT_OK)     # a client that stopped reading would hold the exit (view_bridge)
+    return EXIT_OK
 
 
 def _supervise(arguments, graph, describe):
@@ -293,7 +333,12 @@ def command_replay(arguments):
         parameters['exclude'] = arguments.exclude
     if arguments.topics:
         parameters['topics'] = arguments.topics
-    _run_node_in_process(ReplayerNode, parameters, arguments.namespace)
+    view = _view_process(arguments, tempfile.mkdtemp(prefix='helio_view_logs_'), True)
+    try:
+        _run_node_in_process(ReplayerNode, parameters, arguments.namespace)
+    finally:
+        if view is not None:
+            view.stop()
     return EXIT_OK
 
 
@@ -419,6 +464,7 @@ class PaintSession:
         self.run_dir = run_dir
         self.group = None
         self.recorder = None
+        self.view = None
         self.interrupted = threading.Event()
 
     def run(self, goal):
@@ -456,6 +502,7 @@ class PaintSession:
                         f'{graph.helper.resolve_topic_name("paint")}: stop that graph, or set '
                         'its parameters there')
                 self._start_recorder()
+                self.view = _view_process(self.arguments, self.log_dir, self.group is not None)
                 return self._paint(graph, client, goal)
             finally:
                 self._stop(rclpy)
@@ -527,6 +574,8 @@ class PaintSession:
             result.success else EXIT_FAILED
 
     def _stop(self, rclpy):
+        if self.view is not None:
+            self.view.stop()
         if self.recorder is not None:
             self.recorder.stop()
         if self.group is not None:
@@ -538,6 +587,24 @@ class PaintSession:
 
 
 # ---------------------------------------------------------------------------- parser
+VIEW_PORT = 8765                 # Foxglove's usual WebSocket port
+
+
+def _port(text):
+    value = int(text)
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f'{text} is no port (0..65535)')
+    return value
+
+
+def view_options(command):
+    """Add --view and --view-port (the Foxglove view bridge beside the graph)."""
+    command.add_argument('--view', action='store_true', help='serve the live Foxglove view '
+                         'beside it (as "helio view")')
+    command.add_argument('--view-port', type=_port, default=VIEW_PORT,
+                         help=f'WebSocket port of --view (default {VIEW_PORT})')
+
+
 class UsageError(Exception):
     """A usage problem found after parsing (exit status 2)."""
 
@@ -565,6 +632,7 @@ def build_parser(action_type=None):
                      help='simulated seconds per wall second (0: as fast as possible)')
     sim.add_argument('--out', help='sim_world writes canvas.png and dots.csv here at the end')
     sim.add_argument('--port-dir', help="where the emulated devices' ports are made")
+    view_options(sim)
     sim.set_defaults(handler=command_sim)
 
     rig = commands.add_parser('rig', help='start the hardware graph (Ctrl-C stops it)',
@@ -581,6 +649,7 @@ def build_parser(action_type=None):
                               f'remapped into {kind}/)')
         rig.add_argument(f'--{kind}-camera-param', action='append', metavar='NAME=VALUE',
                          help=f'parameter of the {kind} camera driver; repeatable')
+    view_options(rig)
     rig.set_defaults(handler=command_rig)
 
     preview = commands.add_parser('preview', add_help=False, help='plan a picture: '
@@ -617,6 +686,7 @@ def build_parser(action_type=None):
     paint.add_argument('--real-time-factor', type=_finite_float, default=6.0,
                        help='of a started simulated graph (0: as fast as the graph keeps up, '
                             'in lockstep with every node that reads it)')
+    view_options(paint)
     if action_type is not None:
         add_goal_options(paint, action_type.Goal)
     paint.set_defaults(handler=lambda arguments: command_paint(arguments, action_type))
@@ -648,7 +718,21 @@ def build_parser(action_type=None):
     replay.add_argument('--exclude', nargs='+', metavar='TOPIC', help='topics not played')
     replay.add_argument('--topics', nargs='+', help='only these topics')
     replay.add_argument('--namespace', default='', help='namespace to play into')
+    view_options(replay)
     replay.set_defaults(handler=command_replay)
+
+    view = commands.add_parser('view', help='the live Foxglove view of a running graph',
+                               description='Serve the graph to the Foxglove app over its '
+                               'WebSocket protocol (annotated camera images, 3D scene, '
+                               'plots) until Ctrl-C; open it with the layout '
+                               'config/foxglove/helio.json.')
+    view.add_argument('--port', type=_port, default=VIEW_PORT,
+                      help=f'WebSocket port (default {VIEW_PORT}; 0: any free port, logged)')
+    view.add_argument('--host', default='127.0.0.1',
+                      help='address to bind (default 127.0.0.1: this machine only)')
+    view.add_argument('--namespace', default='', help='namespace of the graph')
+    view.add_argument('--sim-time', action='store_true', help='run on /clock')
+    view.set_defaults(handler=command_view)
 
     report = commands.add_parser('report', help='write the report of a run directory',
                                  description='Write summary.json, plots and report.html '
