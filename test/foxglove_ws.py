@@ -9,6 +9,7 @@ message then comes as a binary frame: opcode 1, uint32 subscription id, uint64 t
 reads again: the slow client whose socket buffers fill.
 """
 
+import contextlib
 import json
 import struct
 import threading
@@ -33,9 +34,10 @@ class FoxgloveClient:
         self.error = None
         self._changed = threading.Condition()
         self._subscriptions = {}       # subscription id -> topic
-        self.socket = connect(f'ws://{host}:{port}', subprotocols=[SUBPROTOCOL],
-                              open_timeout=timeout, close_timeout=1.0,
-                              max_size=None)
+        self._connection = contextlib.ExitStack()
+        self.socket = self._connection.enter_context(connect(
+            f'ws://{host}:{port}', subprotocols=[SUBPROTOCOL], open_timeout=timeout,
+            close_timeout=1.0, max_size=None))
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
 
@@ -99,5 +101,5 @@ class FoxgloveClient:
 
     def close(self):
         """Close the connection (a vanished client, when done abruptly mid-run)."""
-        self.socket.close()
+        self._connection.close()
         self._thread.join(10.0)

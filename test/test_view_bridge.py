@@ -69,6 +69,13 @@ def start_bridge(tmp_path, timeout=60.0):
         time.sleep(0.05)       # polling the log file for the port (no event to wait on)
 
 
+def cpu_seconds(pid):
+    """Return the CPU time (user + system) a process used so far [s] (/proc)."""
+    with open(f'/proc/{pid}/stat') as stream:
+        fields = stream.read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
 def paint_dot(graph, client, run_dir, x, y):
     """Paint one dot; return (its journal record, the goal's wall time [s])."""
     goal = PaintPattern.Goal(run_dir=str(run_dir), fresh=True, n_p_target=N_P_TARGET,
@@ -112,7 +119,9 @@ def test_the_bridge_streams_the_painting_and_leaves_its_timing_alone(tmp_path):
         try:
             assert all(c.subscribed.wait(30.0) for c in (reader, slow, vanished))
             vanished.close()
+            cpu_before = cpu_seconds(bridge.pid)
             watched, watched_wall = paint_dot(graph, painter, tmp_path / 'watched', 0.06, 0.05)
+            bridge_cpu = cpu_seconds(bridge.pid) - cpu_before
             reader.wait_for({'/view/rgb/annotations': 1, '/view/thermal/annotations': 1,
                              '/view/scene': 1}, 60.0)
             counts = {topic: len(reader.messages[topic]) for topic in CHECKED}
@@ -140,6 +149,8 @@ def test_the_bridge_streams_the_painting_and_leaves_its_timing_alone(tmp_path):
     assert {stamp for stamp, _ in reader.messages['/view/rgb/annotations']} <= image_stamps
 
     print(f'\nmessages received per channel while a dot was painted: {counts}')
+    print(f'the bridge used {bridge_cpu:.1f} s of CPU in {watched_wall:.1f} s '
+          f'({100 * bridge_cpu / watched_wall:.0f} % of one core)')
     for name, dot, wall in (('no bridge', alone, alone_wall),
                             ('bridge, 3 clients (1 slow, 1 gone)', watched, watched_wall)):
         print(f'{name}: dwell {dot.dwell:.2f} s, move to cool-down {dot.end - dot.start:.2f} s '
