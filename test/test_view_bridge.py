@@ -163,6 +163,33 @@ def test_the_bridge_streams_the_painting_and_leaves_its_timing_alone(tmp_path):
     assert layout_topics() <= set(reader.channels)
 
 
+def test_the_parameter_file_holds_the_code_defaults():
+    """config/view_bridge.yaml says what the node declares (as test_parameter_defaults)."""
+    import rclpy
+    from rclpy.parameter import Parameter
+    from helio_control.view_bridge import ViewBridgeNode
+    from ament_index_python.packages import get_package_share_directory
+    import yaml
+    from test_parameter_defaults import flattened, same
+    path = os.path.join(get_package_share_directory('helio_control'), 'config',
+                        'view_bridge.yaml')
+    with open(path) as stream:
+        (section,) = yaml.safe_load(stream).values()
+    written = dict(flattened(section['ros__parameters']))
+    rclpy.init()
+    try:
+        # port 0 here: the test must not take the default port another run may hold
+        node = ViewBridgeNode(parameter_overrides=[Parameter('port', value=0)])
+        declared = {key: p.value for key, p in node._parameters.items()}
+        node.destroy_node()
+    finally:
+        rclpy.shutdown()
+    assert written['port'] == 8765 and declared['port'] == 0
+    differ = {key: (declared.get(key), value) for key, value in written.items()
+              if key != 'port' and not same(declared.get(key), value)}
+    assert not differ, f'view_bridge.yaml differs from the code: {differ}'
+
+
 def layout_topics(path=LAYOUT):
     """Return the topics the Foxglove layout names (keys and values starting with '/')."""
     topics = set()
