@@ -247,14 +247,14 @@ def _with_view(arguments, specs, sim_time):
                              {'port': arguments.view_port}, sim_time=sim_time)]
 
 
-def _view_process(arguments, log_dir, sim_time):
+def _view_process(arguments, log_dir, sim_time, plan_file=''):
     """Return the started view bridge process when --view asks, else None."""
     if not getattr(arguments, 'view', False):
         return None
     from helio_control.bringup import interrupts_deferred, node_environment
     from helio_optics.node_kit.processes import NodeProcess
     process = NodeProcess('helio_control', 'view_bridge', {
-        'port': arguments.view_port, 'use_sim_time': sim_time},
+        'port': arguments.view_port, 'use_sim_time': sim_time, 'plan_file': plan_file},
         namespace=arguments.namespace, log_dir=log_dir, env=node_environment())
     with interrupts_deferred():
         process.start()
@@ -502,7 +502,8 @@ class PaintSession:
                         f'{graph.helper.resolve_topic_name("paint")}: stop that graph, or set '
                         'its parameters there')
                 self._start_recorder()
-                self.view = _view_process(self.arguments, self.log_dir, self.group is not None)
+                self.view = _view_process(self.arguments, self.log_dir, self.group is not None,
+                                          os.path.join(self.run_dir, 'plan.json'))
                 return self._paint(graph, client, goal)
             finally:
                 self._stop(rclpy)

@@ -84,7 +84,7 @@ class ViewModel:
         self.target = None               # (3,) world, the dot being heated
         self.target_since_ns = None
         self.burnt = []                  # earlier targets, in order
-        self.planned = []                # targets still to come (none known live: see README)
+        self.plan = None                 # (N, 3) the painting's dots in order, when known
 
     # ---- inputs ------------------------------------------------------------------------------
     def feed(self, topic, message):
@@ -137,6 +137,25 @@ class ViewModel:
             self.target_since_ns = stamp_to_nanoseconds(message.header.stamp)
         self.target = target
 
+    def set_plan(self, dots):
+        """Take the painting's dots in burn order ((N, 2) world x, y [m]; plan.json)."""
+        dots = np.asarray(dots, dtype=float).reshape(-1, 2)
+        self.plan = np.column_stack([dots, np.zeros(len(dots))])
+
+    def _current_index(self):
+        """Return the plan index of the current target (-1: before the first; None: no plan)."""
+        if self.plan is None or not len(self.plan):
+            return None
+        if self.target is None:
+            return len(self.plan) - 1 if self.burnt else -1
+        return int(np.argmin(np.linalg.norm(self.plan[:, :2] - self.target[:2], axis=1)))
+
+    @property
+    def planned(self):
+        """Return the plan's dots after the current one ([] without a plan)."""
+        index = self._current_index()
+        return [] if index is None else list(self.plan[index + 1:])
+
     def _robot_to_world(self, vector):
         direction = np.array([vector.x, vector.y, vector.z], dtype=float)
         norm = np.linalg.norm(direction)
@@ -183,10 +202,15 @@ class ViewModel:
 
     def targets(self):
         """Return the known target points (N, 3) and their states, for the 3D view."""
-        points = [*self.burnt, *([self.target] if self.target is not None else []),
-                  *self.planned]
-        states = ['burnt'] * len(self.burnt) + ['current'] * (self.target is not None) \
-            + ['planned'] * len(self.planned)
+        index = self._current_index()
+        if index is not None:          # the plan's order: before the current one is done
+            states = ['burnt' if i < index else 'current' if i == index and
+                      self.target is not None else 'planned' for i in range(len(self.plan))]
+            if self.target is None and self.burnt:
+                states = ['burnt'] * len(self.plan)
+            return list(self.plan), states
+        points = [*self.burnt, *([self.target] if self.target is not None else [])]
+        states = ['burnt'] * len(self.burnt) + ['current'] * (self.target is not None)
         return points, states
 
     def _focus(self):

@@ -103,3 +103,24 @@ def test_the_stamp_of_a_serialized_image_is_read_from_its_header():
     image = Image()
     image.header.stamp.sec, image.header.stamp.nanosec = 1782028813, 200000000
     assert cdr_stamp_ns(serialize_message(image)) == 1782028813200000000
+
+
+def test_with_the_plan_the_targets_are_its_dots_by_state_and_the_next_ones_are_drawn():
+    model = ViewModel(Rig(), next_count=2)
+    model.set_plan([(0.05, 0.05), (0.06, 0.05), (0.07, 0.05), (0.08, 0.05)])
+    assert model.targets()[1] == ['planned'] * 4 and len(model.planned) == 4
+    model.on_window(window(0.05, 0.05, 100))
+    model.on_window(window(0.06, 0.05, 110))
+    points, states = model.targets()
+    assert states == ['burnt', 'current', 'planned', 'planned']
+    assert points[1] == pytest.approx((0.06, 0.05, 0.0))
+    assert [p[0] for p in model.planned] == pytest.approx([0.07, 0.08])
+    model.on_rgb_info(camera_info_from_camera(CAMERA))
+    model.on_spot(spot_seen_from_above())
+    circles = model.rgb_annotations(0)['circles']
+    # spot centre, one burnt dot, the next two (of next_count), the current target
+    assert len(circles) == 1 + 1 + 2 + 1
+    nan = window(0.0, 0.0, 140)
+    nan.point.x = math.nan
+    model.on_window(nan)
+    assert model.targets()[1] == ['burnt'] * 4
