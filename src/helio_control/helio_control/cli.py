@@ -543,7 +543,8 @@ class PaintSession:
                                  camera_decimation=self.arguments.camera_decimation,
                                  namespace=self.arguments.namespace,
                                  use_sim_time=self.group is not None,
-                                 log_dir=self.log_dir)
+                                 log_dir=self.log_dir,
+                                 plan_file=os.path.join(self.run_dir, 'plan.json'))
         with interrupts_deferred():
             self.recorder.process.start()
         self.recorder.start_wait()

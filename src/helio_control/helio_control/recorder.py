@@ -135,8 +135,10 @@ class RecorderNode(Node):
         self.view = None
         if view_file:
             from helio_control.view_bridge import declare_view_model
-            self.view = ViewRecording(self, declare_view_model(self), JsonMcapWriter(
-                os.path.join(output_dir, view_file), chunk_size, chunk_period, compression))
+            model, plan = declare_view_model(self)
+            self.view = ViewRecording(self, model, JsonMcapWriter(
+                os.path.join(output_dir, view_file), chunk_size, chunk_period, compression),
+                plan)
             atexit.register(self.view.writer.close)
         self.failure = ''
         self._queue = queue.Queue()
@@ -264,9 +266,9 @@ class ViewRecording:
     bridge would send with it, logged at the image's time and stamped with its stamp.
     """
 
-    def __init__(self, node, model, writer):
+    def __init__(self, node, model, writer, plan):
         """Resolve the model's topics in `node`'s namespace; register the outputs."""
-        self.model, self.writer = model, writer
+        self.model, self.writer, self.plan = model, writer, plan
         self.inputs = {node.resolve_topic_name(topic): (topic, message_class(type_name))
                        for topic, (type_name, _) in INPUTS.items()}
         self.images = {node.resolve_topic_name(t): t for t in (RGB_IMAGE, THERMAL_IMAGE)}
@@ -281,6 +283,7 @@ class ViewRecording:
             name, cls = self.inputs[topic]
             self.model.feed(name, deserialize_message(data, cls))
         elif topic in self.images:
+            self.plan.refresh(self.model)        # a plan not read is drawn without
             for output, message in self.model.outputs_for_image(self.images[topic],
                                                                 cdr_stamp_ns(data)):
                 self.writer.write(self.outputs[output], log_time_ns,

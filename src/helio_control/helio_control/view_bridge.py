@@ -27,9 +27,8 @@ import time
 
 import foxglove
 from helio_control.bag_files import full_type_name, message_class, message_definition
-from helio_control.plan import Plan
 from helio_control.view_model import cdr_stamp_ns, INPUTS, output_schema_bytes, OUTPUTS
-from helio_control.view_model import RGB_IMAGE, THERMAL_IMAGE, ViewModel
+from helio_control.view_model import PlanFile, RGB_IMAGE, THERMAL_IMAGE, ViewModel
 from helio_optics.node_kit.deployment import declare_rig
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
@@ -51,13 +50,15 @@ NEWEST_LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 
 
 def declare_view_model(node):
-    """Declare the view's parameters on `node` (marker, panel, rig); return its ViewModel."""
+    """Declare the view's parameters on `node`; return (ViewModel, PlanFile)."""
     marker_side = declare(node, 'marker_side', 0.04, 'ArUco marker black square, as the '
                           "spot detector's [m].", 0.001, 1.0)
     panel_extent = declare(node, 'panel_extent', [-0.04, 0.16, -0.04, 0.16], 'The wood '
                            'around the marker: x0, x1, y0, y1 in the world frame [m].')
     rig, _ = declare_rig(node)
-    return ViewModel(rig, marker_side, panel_extent)
+    plan_file = declare(node, 'plan_file', '', "The painting's plan.json, read when it "
+                        'appears or changes: the next targets (empty: none).')
+    return ViewModel(rig, marker_side, panel_extent), PlanFile(plan_file)
 
 
 def ros_channel(topic, type_name, context=None):
@@ -95,10 +96,7 @@ class ViewBridgeNode(Node):
                                    'two thermal images forwarded [s].', 0.0, 60.0)}
         backlog = declare(self, 'message_backlog_size', 16, 'Messages queued per client; a '
                           'slow client loses the oldest [-].', 1, 1024)
-        self.model = declare_view_model(self)
-        self.plan_file = declare(self, 'plan_file', '', "The painting's plan.json, read when "
-                                 'it appears or changes: the next targets (empty: none).')
-        self._plan_stamp = None
+        self.model, self.plan = declare_view_model(self)
         self.server = foxglove.start_server(name='helio', host=host, port=port,
                                             message_backlog_size=backlog)
         self.port = self.server.port
@@ -142,24 +140,14 @@ class ViewBridgeNode(Node):
                 self._log(topic, bytes(data), stamp_ns)
             if not any(self.channels[output].has_sinks() for output in OUTPUTS):
                 return                   # nobody looks: nothing drawn
-            if topic == RGB_IMAGE and self.plan_file:
-                self._read_plan()
+            if topic == RGB_IMAGE:
+                problem = self.plan.refresh(self.model)
+                if problem:
+                    self.get_logger().warning(problem, once=True)
             for output, message in self.model.outputs_for_image(topic, stamp_ns):
                 if self.channels[output].has_sinks():
                     self._log(output, message, stamp_ns)
         return take
-
-    def _read_plan(self):
-        try:
-            stamp = os.stat(self.plan_file).st_mtime_ns
-            if stamp != self._plan_stamp:
-                with open(self.plan_file) as stream:
-                    self.model.set_plan(Plan.from_json(stream.read()).dots)
-                self._plan_stamp = stamp
-        except FileNotFoundError:
-            pass                         # not written yet: the goal has not started
-        except (OSError, ValueError, KeyError) as error:
-            self.get_logger().warning(f'{self.plan_file} not read: {error}', once=True)
 
     def _log(self, topic, message, stamp_ns):
         self.channels[topic].log(message, log_time=stamp_ns)

@@ -16,6 +16,7 @@ out (no spot: no ellipse; no joints: no camera poses in the scene).
 
 import json
 import math
+import os
 
 from helio_control.view_scene import ground_circle, IMAGE_ANNOTATIONS, project_to_image
 from helio_control.view_scene import ray_entity, ray_line, rgb_annotations, SCENE_UPDATE
@@ -267,6 +268,34 @@ class ViewModel:
         else:
             produced = []
         return [(name, message) for name, message in produced if message is not None]
+
+
+class PlanFile:
+    """The painting's plan.json, given to a ViewModel when it appears or changes."""
+
+    def __init__(self, path):
+        """Watch `path` ('' : no plan)."""
+        self.path = path
+        self._stamp = None
+
+    def refresh(self, model):
+        """Give `model` the plan if the file is new or changed; return a problem or ''."""
+        if not self.path:
+            return ''
+        try:
+            stamp = os.stat(self.path).st_mtime_ns
+        except FileNotFoundError:
+            return ''                    # not written yet: the goal has not started
+        if stamp == self._stamp:
+            return ''
+        from helio_control.plan import Plan     # its planning imports, only when used
+        try:
+            with open(self.path) as stream:
+                model.set_plan(Plan.from_json(stream.read()).dots)
+        except (OSError, ValueError, KeyError) as error:
+            return f'{self.path} not read: {error}'
+        self._stamp = stamp
+        return ''
 
 
 def _camera(message):

@@ -1,6 +1,7 @@
 """The Foxglove view's state (view_model) fed with the graph's messages, no rclpy.init."""
 
 import math
+import os
 
 from geometry_msgs.msg import PointStamped, Vector3Stamped
 from helio_control.view_model import cdr_stamp_ns, METRICS_SCHEMA, OUTPUTS, ViewModel
@@ -124,3 +125,18 @@ def test_with_the_plan_the_targets_are_its_dots_by_state_and_the_next_ones_are_d
     nan.point.x = math.nan
     model.on_window(nan)
     assert model.targets()[1] == ['burnt'] * 4
+
+
+def test_the_plan_file_is_read_when_it_appears_and_again_when_it_changes(tmp_path):
+    from helio_control.plan import plan_dots
+    from helio_control.view_model import PlanFile
+    path = tmp_path / 'plan.json'
+    model, plan_file = ViewModel(Rig()), PlanFile(str(path))
+    assert plan_file.refresh(model) == '' and model.plan is None     # not written yet
+    path.write_text(plan_dots([(0.05, 0.05), (0.06, 0.05)]).to_json())
+    assert plan_file.refresh(model) == ''
+    assert model.plan[:, :2] == pytest.approx(np.array([(0.05, 0.05), (0.06, 0.05)]))
+    path.write_text('{"broken": ')
+    os.utime(path, ns=(1, 1))        # a new modification time, as a rewrite gives
+    assert 'not read' in plan_file.refresh(model)
+    assert len(model.plan) == 2                                      # the last good one
