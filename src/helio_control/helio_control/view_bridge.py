@@ -11,7 +11,8 @@ offers these channels (names under the graph's namespace):
 - ``/view/rgb/annotations``, ``/view/thermal/annotations`` (``foxglove.ImageAnnotations``),
   ``/view/scene``, ``/view/sun_truth`` (``foxglove.SceneUpdate``) and ``/view/metrics``
   (``helio.ViewMetrics``), JSON with a JSON schema, drawn by ``view_model.ViewModel``
-  at each image forwarded and stamped with that image's stamp.
+  at each image forwarded and stamped with that image's stamp (``plan_file``: the run's
+  plan.json, for the next targets).
 
 It never slows the graph: it is its own process; every subscription keeps the newest
 message only (depth 1, best effort, latched topics transient local); images are decimated

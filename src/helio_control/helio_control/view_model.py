@@ -6,8 +6,9 @@ pose, thermal statistics, the merged joint states, the sun estimate and the simu
 the painter's heating window) and answers the view's messages as plain dicts
 (``view_scene``): the RGB and thermal image annotations, the 3D scene, the true sun and the
 painting's figures. It imports no rclpy and no foxglove: the live bridge (``view_bridge``)
-and the recorder (``recorder``, ``annotate``) feed it deserialized messages and log its
-answers, so the live view and the recording show the same drawings.
+and the recorder (``recorder.ViewRecording``) feed it deserialized messages and log its
+answers, so the live view and the recording show the same drawings. ``PlanFile`` gives it
+the run's plan.json (every dot by state, the next targets) when there is one.
 
 ``INPUTS`` names the topics it reads (relative names) with their types; ``OUTPUTS`` the
 topics it writes with their Foxglove schema names. Inputs that never come leave their part
