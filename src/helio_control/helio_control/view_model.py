@@ -41,6 +41,8 @@ INPUTS = {                      # topic: (type, ViewModel method)
     'sun/estimate': ('helio_msgs/msg/SunEstimate', 'on_sun'),
     'sim/truth/sun_direction': ('geometry_msgs/msg/Vector3Stamped', 'on_sun_truth'),
     'thermal/window': ('geometry_msgs/msg/PointStamped', 'on_window'),
+    'paint/_action/feedback': ('helio_msgs/action/PaintPattern_FeedbackMessage',
+                               'on_feedback'),
 }
 VIEW_METRICS = 'helio.ViewMetrics'
 OUTPUTS = {                     # topic (absolute, under the graph's namespace): schema
@@ -87,6 +89,8 @@ class ViewModel:
         self.target_since_ns = None
         self.burnt = []                  # earlier targets, in order
         self.plan = None                 # (N, 3) the painting's dots in order, when known
+        self.dot_index = None            # the painter's feedback: the dot worked on
+        self.phase = ''
 
     # ---- inputs ------------------------------------------------------------------------------
     def feed(self, topic, message):
@@ -139,6 +143,23 @@ class ViewModel:
             self.target_since_ns = stamp_to_nanoseconds(message.header.stamp)
         self.target = target
 
+    def on_feedback(self, message):
+        """Take the painter's feedback: which dot of the plan it works on, in which phase."""
+        feedback = message.feedback
+        if feedback.phase == 'heating' and self.phase != 'heating' and self.stats is not None:
+            self.target_since_ns = stamp_to_nanoseconds(self.stats.header.stamp)
+        self.dot_index, self.phase = int(feedback.index), feedback.phase
+
+    @property
+    def current(self):
+        """Return the dot being worked on (3,): the heating window, else the plan's, or None."""
+        if self.target is not None:
+            return self.target
+        index = self._current_index()
+        if index is None or self.phase == 'done' or not 0 <= index < len(self.plan):
+            return None
+        return self.plan[index]
+
     def set_plan(self, dots):
         """Take the painting's dots in burn order ((N, 2) world x, y [m]; plan.json)."""
         dots = np.asarray(dots, dtype=float).reshape(-1, 2)
@@ -148,6 +169,9 @@ class ViewModel:
         """Return the plan index of the current target (-1: before the first; None: no plan)."""
         if self.plan is None or not len(self.plan):
             return None
+        if self.dot_index is not None:   # the painter says which
+            return len(self.plan) if self.phase == 'done' else min(self.dot_index,
+                                                                   len(self.plan) - 1)
         if self.target is None:
             return len(self.plan) - 1 if self.burnt else -1
         return int(np.argmin(np.linalg.norm(self.plan[:, :2] - self.target[:2], axis=1)))
@@ -182,7 +206,7 @@ class ViewModel:
         if self.rgb_camera is None or self.T_world_rgb is None:
             return None
         return rgb_annotations(stamp_ns, self.rgb_camera, self.T_world_rgb, self.marker,
-                               self.spot, self.target, self.planned[:self.next_count],
+                               self.spot, self.current, self.planned[:self.next_count],
                                self.burnt)
 
     def thermal_annotations(self, stamp_ns):
@@ -206,9 +230,10 @@ class ViewModel:
         """Return the known target points (N, 3) and their states, for the 3D view."""
         index = self._current_index()
         if index is not None:          # the plan's order: before the current one is done
-            states = ['burnt' if i < index else 'current' if i == index and
-                      self.target is not None else 'planned' for i in range(len(self.plan))]
-            if self.target is None and self.burnt:
+            working = self.current is not None
+            states = ['burnt' if i < index else 'current' if i == index and working
+                      else 'planned' for i in range(len(self.plan))]
+            if self.dot_index is None and self.target is None and self.burnt:
                 states = ['burnt'] * len(self.plan)
             return list(self.plan), states
         points = [*self.burnt, *([self.target] if self.target is not None else [])]
@@ -216,8 +241,8 @@ class ViewModel:
         return points, states
 
     def _focus(self):
-        if self.target is not None:
-            return self.target
+        if self.current is not None:
+            return self.current
         if self.spot is not None:
             return np.asarray(self.spot['center'])
         return np.zeros(3)
@@ -241,16 +266,17 @@ class ViewModel:
         """Return the painting's figures for the plots, or None before any statistics."""
         if self.stats is None:
             return None
-        dwell = 0.0 if self.target_since_ns is None or self.target is None \
+        dwell = 0.0 if self.target_since_ns is None or self.current is None \
             else max(0.0, (stamp_ns - self.target_since_ns) * 1e-9)
         placement = math.nan
-        if self.target is not None and self.spot is not None:
+        if self.current is not None and self.spot is not None:
             placement = float(np.linalg.norm(np.asarray(self.spot['center'])[:2]
-                                             - self.target[:2]))
+                                             - self.current[:2]))
         return {'timestamp': time_dict(stamp_ns), 't_max': float(self.stats.t_max),
                 'n_p': int(self.stats.n_p), 'dwell': dwell,
                 'placement': placement if math.isfinite(placement) else -1.0,
-                'dots_burnt': len(self.burnt)}
+                'dots_burnt': len(self.burnt) if self.dot_index is None
+                else self.dot_index + (self.phase == 'done')}
 
     def outputs_for_image(self, topic, stamp_ns):
         """

@@ -140,3 +140,27 @@ def test_the_plan_file_is_read_when_it_appears_and_again_when_it_changes(tmp_pat
     os.utime(path, ns=(1, 1))        # a new modification time, as a rewrite gives
     assert 'not read' in plan_file.refresh(model)
     assert len(model.plan) == 2                                      # the last good one
+
+
+def test_the_painters_feedback_says_which_dot_of_the_plan_is_worked_on():
+    from helio_msgs.action import PaintPattern
+    model = ViewModel(Rig())
+    model.set_plan([(0.05, 0.05), (0.06, 0.05), (0.07, 0.05)])
+
+    def feedback(index, phase, stamp_sec):
+        model.on_stats(ThermalStats(t_max=100.0, n_p=3))
+        model.stats.header.stamp.sec = stamp_sec
+        message = PaintPattern.Impl.FeedbackMessage()
+        message.feedback.index, message.feedback.phase = index, phase
+        model.on_feedback(message)
+
+    feedback(1, 'moving', 10)
+    assert model.targets()[1] == ['burnt', 'current', 'planned']
+    assert model.current == pytest.approx((0.06, 0.05, 0.0))
+    feedback(1, 'heating', 12)
+    feedback(1, 'heating', 15)
+    metrics = model.metrics(15 * 10**9)
+    assert (metrics['dwell'], metrics['dots_burnt']) == (pytest.approx(3.0), 1)
+    feedback(2, 'done', 30)
+    assert model.targets()[1] == ['burnt'] * 3 and model.current is None
+    assert model.metrics(30 * 10**9)['dots_burnt'] == 3
