@@ -485,14 +485,20 @@ class DeviceActionNode(Node):
         self.get_logger().error(self.setup_notes['emergency'])
         self._publish_status()
 
-    def request_escape(self, why):
+    def request_escape(self, why, spare=lambda job: False):
         """
         From any thread: stop the running job and the device, then make the emergency move.
 
         Done once on the device thread, as for an emergency stop but not latched: goals are
-        taken again at once. `why` heads the aborted job's message and the log line.
+        taken again at once. `why` heads the aborted job's message and the log line. A
+        running job for which `spare(job)` is true is let run, and nothing else is done (it
+        is an escape already: aborting it would only stop the lens on its way off the sun).
         """
         def escape():
+            run = self._run
+            if run is not None and spare(run):
+                self.get_logger().error(f'{why}: an escape move already runs ({run.what})')
+                return
             done = self._stop_and_escape(why)
             self.get_logger().error(f'{why}: {"; ".join(d for d in done if d)}')
             self._publish_status()

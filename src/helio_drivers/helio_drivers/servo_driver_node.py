@@ -169,7 +169,8 @@ class ServoDriverNode(DeviceActionNode):
         self.heating_guard.disarm()
         self.request_escape(
             f'HEATING GUARD: the lens planner fell silent with the lens at the heating '
-            f'distance ({silence:.2f} s node clock, {wall_silence:.2f} s wall)')
+            f'distance ({silence:.2f} s node clock, {wall_silence:.2f} s wall)',
+            spare=lambda job: job.handle is not None and job.handle.request.escape)
 
     # ---- emergency stop ---------------------------------------------------------------------
 

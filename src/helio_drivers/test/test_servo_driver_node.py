@@ -324,3 +324,21 @@ def test_the_lens_planner_silent_while_heating_turns_the_lens_off_the_sun_and_cl
     assert graph.wait_status(lambda s: s.connected)
     assert graph.run(MoveWrist.Goal(yaw=0.0, pitch=0.0)).result.success
     graph.helper.destroy_publisher(beats)
+
+
+def test_the_heating_guard_lets_an_escape_goal_already_running_finish(clock):
+    # the painter's wrist escape (the lens planner dead, the arm not answering) and the
+    # guard act on the same silence: aborting the escape would stop the lens on its way
+    # off the sun (seen in a fresh run: the painter then reported RETREAT FAILED)
+    emulator = MaestroEmulator(calibrations=[YAW, PITCH], clock=clock, **CONFIGURED)
+    with driver_on(emulator, wrist_graph(escape_speed_us_per_s=200.0)) as (_, graph):
+        assert graph.run(MoveWrist.Goal(yaw=0.2, pitch=-0.2)).result.success
+        beats = graph.helper.create_publisher(Header, 'lens/heating', 10)
+        for _ in range(10):
+            beats.publish(Header(frame_id='heating'))
+            graph.joint_states.wait_for_count(len(graph.joint_states.messages) + 1)
+        escape = graph.send(MoveWrist.Goal(yaw=0.2, pitch=0.4, escape=True))  # ~2 s
+        result = graph.goal_result(escape, 10.0).result
+        assert result.success, result.message
+        assert not graph.driver.heating_guard.armed        # the guard fired meanwhile
+        graph.joint_states.wait_for_message(lambda m: abs(m.position[1] - 0.4) < 1e-3, 5.0)
