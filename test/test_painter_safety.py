@@ -157,6 +157,13 @@ class Rig:
             self.handles.clear()
             self.set_world(real_time_factor=0.0, unplugged=[''])
 
+    def assert_no_char_grows(self, seconds=3.0):
+        """Assert that the char map `seconds` of sim time from now is the char map now."""
+        burnt = self.charred_dots()
+        self.wait_sim(seconds)
+        assert [round(d.area, 9) for d in self.charred_dots()] == \
+            [round(d.area, 9) for d in burnt]
+
     def heating(self, index=0, n_p=5):
         """Return (feedback callback, event set once dot `index` heats with N_p >= n_p)."""
         event = threading.Event()
@@ -330,11 +337,7 @@ def killed_driver_mid_dot(rig, label, y, x=0.074):
     print(f'{label} killed: {result.message}')
     device = 'dobot' if label == 'dobot_driver' else 'servo'
     assert not result.success and device in result.message, result.message
-    # no char grows once the focus is off: the char 3 s of sim time later is the same
-    burnt = rig.charred_dots()
-    rig.wait_sim(3.0)
-    assert [round(d.area, 9) for d in rig.charred_dots()] == \
-        [round(d.area, 9) for d in burnt]
+    rig.assert_no_char_grows()
     return delay, result
 
 
@@ -492,12 +495,7 @@ def test_the_emergency_stop_takes_the_focus_off_and_refuses_goals_until_reset(ri
     ended = graph.goal_result(handle, ANSWER_TIMEOUT).result
     print(f'painting: {ended.message}')
     assert not ended.success and 'stopped by the EMERGENCY STOP' in ended.message
-    # no char grows once the focus is off: the char after 3 s of sim time is the char at
-    # the stop
-    burnt = rig.charred_dots()
-    rig.wait_sim(3.0)
-    assert [round(d.area, 9) for d in rig.charred_dots()] == \
-        [round(d.area, 9) for d in burnt]
+    rig.assert_no_char_grows()
     # every goal is refused, naming the stop
     refused = graph.run_goal(rig.client, PaintPattern.Goal(
         points=dots_along(0.09, 1), fresh=True, run_dir=str(rig.runs / 'next')),
