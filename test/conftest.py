@@ -4,9 +4,8 @@ import contextlib
 import os
 import signal
 
-from helio_control.bringup import simulated_graph, start_graph
-from helio_msgs.msg import DeviceStatus
-from helio_optics.node_kit.in_process_graph import InProcessGraph, TRANSIENT_LOCAL_QOS
+from helio_control.bringup import simulated_graph, start_graph, wait_until_up
+from helio_optics.node_kit.in_process_graph import InProcessGraph
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -14,6 +13,9 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # then stops them). SIGTERM, as test.sh's HELIO_TEST_TIMEOUT sends it, would end pytest at
 # once and leave every started graph running; as Ctrl-C it runs the fixtures' teardown.
 signal.signal(signal.SIGTERM, signal.default_int_handler)
+
+# a started graph's nodes all spin and its drivers hold their devices within this [s]
+GRAPH_UP_TIMEOUT = 120.0
 
 
 @contextlib.contextmanager
@@ -42,23 +44,10 @@ def graph_of_processes(tmp_path, nodes, overrides=None, namespace='',
         group = start_graph(specs, namespace, log_dir=str(tmp_path / 'logs'),
                             on_death=on_death)
         try:
+            wait_until_up(client, specs, GRAPH_UP_TIMEOUT)
             yield group, client
         finally:
             outcomes = group.stop()
             late = {label: how for label, how in outcomes.items() if how != 'SIGINT'}
             if late:        # a node that ignores Ctrl-C costs every test the 10 s wait
                 print(f'\nnodes not stopped by SIGINT: {late}')
-
-
-def wait_for_devices(graph, timeout, devices=('dobot', 'servo')):
-    """
-    Wait until each driver's latched `<device>/status` says it holds its (emulated) device.
-
-    A driver started before the world retries the world's pty with a growing delay (0.2 s,
-    doubled each time up to the simulated graph's ``reconnect_max`` of 0.5 s), so it connects
-    up to 0.5 s after the world opened its ports; a test that counts the drivers' output waits
-    for this first.
-    """
-    for device in devices:
-        graph.collect(DeviceStatus, f'{device}/status', TRANSIENT_LOCAL_QOS) \
-            .wait_for_message(lambda status: status.connected, timeout)

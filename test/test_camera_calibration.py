@@ -15,7 +15,8 @@ compared with the world's TRUE intrinsics (``sim/truth/rgb_camera_info``). Then
 import math
 import time
 
-from conftest import graph_of_processes, wait_for_devices
+from conftest import graph_of_processes
+from helio_control.bringup import wait_for_devices
 from helio_control.camera_calibration_graph import calibrate_on_graph
 from helio_msgs.msg import SpotObservation
 from helio_optics.calibration_board import BoardSpec

@@ -24,8 +24,9 @@ import signal
 import subprocess
 import sys
 
-from conftest import graph_of_processes, wait_for_devices
+from conftest import graph_of_processes
 from helio_control.bringup import SIMULATED_DEVICE_REPLY_TIMEOUT, SIMULATED_SILENCE_TIMEOUT
+from helio_control.bringup import wait_for_devices
 from helio_control.calibration_store import rig_description, save_calibration
 from helio_drivers import dobot_protocol as proto
 from helio_drivers.dobot_emulator import DobotEmulator

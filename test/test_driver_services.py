@@ -16,7 +16,8 @@ import math
 import signal
 import time
 
-from conftest import graph_of_processes, wait_for_devices
+from conftest import graph_of_processes
+from helio_control.bringup import wait_for_devices
 from helio_drivers import dobot_protocol as proto
 from helio_drivers.dobot_emulator import DobotEmulator
 from helio_msgs.action import MoveArm

@@ -15,7 +15,8 @@ import signal
 import threading
 import time
 
-from conftest import graph_of_processes, wait_for_devices
+from conftest import graph_of_processes
+from helio_control.bringup import wait_for_devices
 from helio_msgs.action import MoveArm, MoveWrist
 import pytest
 

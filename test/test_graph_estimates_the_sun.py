@@ -13,8 +13,9 @@ The same graph runs again under a namespace (``/rig1``): relative names keep it 
 
 import math
 
-from conftest import graph_of_processes, wait_for_devices
+from conftest import graph_of_processes
 from geometry_msgs.msg import Vector3Stamped
+from helio_control.bringup import wait_for_devices
 from helio_control.fixture_bags import move_joints
 from helio_control.sun_sweep import sweep_poses, view_points
 from helio_msgs.action import MoveArm, MoveWrist

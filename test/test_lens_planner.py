@@ -27,8 +27,9 @@ import math
 import signal
 import time
 
-from conftest import graph_of_processes, wait_for_devices
+from conftest import graph_of_processes
 from geometry_msgs.msg import Point, PointStamped, PoseStamped, Vector3Stamped
+from helio_control.bringup import wait_for_devices
 from helio_msgs.action import CalibrateFocus, CalibrateRig, CalibrateWorld, FocusLens
 from helio_msgs.action import SweepSun
 from helio_msgs.msg import LightTruth

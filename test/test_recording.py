@@ -16,9 +16,9 @@ import signal
 import subprocess
 import sys
 
-from conftest import graph_of_processes, wait_for_devices
+from conftest import graph_of_processes
 from helio_control.bag_files import bag_file, is_complete, salvage_records
-from helio_control.bringup import node_environment
+from helio_control.bringup import node_environment, wait_for_devices
 from helio_control.recorder import Recorder, recorder_subscribed
 from helio_msgs.msg import ThermalStats
 from helio_optics.node_kit.conversions import stamp_to_nanoseconds

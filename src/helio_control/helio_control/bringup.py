@@ -241,6 +241,42 @@ def start_graph(specs, namespace='', log_dir=None, env=None, on_death=None):
                         stop_first=SAFE_STOP_ORDER).start()
 
 
+# the device each driver node holds (its latched ``<device>/status``)
+DRIVER_DEVICES = {'dobot_driver': 'dobot', 'servo_driver': 'servo'}
+
+
+def wait_for_devices(graph, timeout, devices=('dobot', 'servo')):
+    """
+    Wait until each driver's latched `<device>/status` says it holds its (emulated) device.
+
+    `graph` is an ``InProcessGraph``. A driver started before the world retries the world's
+    pty with a growing delay (0.2 s, doubled each time up to the simulated graph's
+    ``reconnect_max`` of 0.5 s), so it connects up to 0.5 s after the world opened its ports.
+    """
+    from helio_msgs.msg import DeviceStatus
+    from helio_optics.node_kit.in_process_graph import TRANSIENT_LOCAL_QOS
+    for device in devices:
+        graph.collect(DeviceStatus, f'{device}/status', TRANSIENT_LOCAL_QOS) \
+            .wait_for_message(lambda status: status.connected, timeout)
+
+
+def wait_until_up(graph, specs, timeout):
+    """
+    Wait until every node of `specs` spins and each of their drivers holds its device.
+
+    Eight node processes starting at once keep a 2-core machine busy for seconds (imports,
+    the world's kernels): a goal sent as soon as the painter answers moved the wrist while
+    the world's emulators were starved, and the move failed as a silent device (CI,
+    2026-11-28: "servo controller not connected ... no valid reply within the silence limit
+    of 1.000 s"). A started graph is handed over only once it is up.
+    """
+    import time
+    deadline = time.monotonic() + timeout
+    graph.wait_for_nodes([spec.name for spec in specs], timeout)
+    devices = [DRIVER_DEVICES[spec.name] for spec in specs if spec.name in DRIVER_DEVICES]
+    wait_for_devices(graph, max(deadline - time.monotonic(), 0.0), devices)
+
+
 @contextlib.contextmanager
 def interrupts_deferred():
     """

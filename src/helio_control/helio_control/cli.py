@@ -463,6 +463,7 @@ class PaintSession:
         self.action_type = action_type
         self.run_dir = run_dir
         self.group = None
+        self.specs = ()
         self.recorder = None
         self.view = None
         self.interrupted = threading.Event()
@@ -495,6 +496,7 @@ class PaintSession:
                             f'the simulated graph started but no painter answers on '
                             f'{graph.helper.resolve_topic_name("paint")} within '
                             f'{self.arguments.start_timeout:g} s (logs: {self.log_dir})')
+                    self._wait_until_up(graph)
                 elif self.arguments.set:
                     raise CommandError(
                         '--set sets the parameters of the simulated graph that helio paint '
@@ -522,8 +524,19 @@ class PaintSession:
         world['output_dir'] = self.run_dir
         port_dir = tempfile.mkdtemp(prefix='helio_paint_ports_')
         with interrupts_deferred():     # no node started but not kept for stopping
-            self.group = start_graph(simulated_graph(port_dir, overrides=overrides),
-                                     self.arguments.namespace, self.log_dir)
+            self.specs = simulated_graph(port_dir, overrides=overrides)
+            self.group = start_graph(self.specs, self.arguments.namespace, self.log_dir)
+
+    def _wait_until_up(self, graph):
+        """Wait until the started graph's nodes spin and its drivers hold their devices."""
+        from helio_control.bringup import wait_until_up
+        from helio_optics.node_kit.in_process_graph import GraphFailure, GraphTimeout
+        try:
+            wait_until_up(graph, self.specs, self.arguments.start_timeout)
+        except (GraphTimeout, GraphFailure) as error:
+            self._graph_check()
+            raise CommandError(f'the simulated graph did not come up: {error} '
+                               f'(logs: {self.log_dir})') from None
 
     def _graph_check(self):
         from helio_optics.node_kit.processes import NodeProcessError

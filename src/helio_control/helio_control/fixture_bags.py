@@ -26,7 +26,7 @@ import sys
 import tempfile
 
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
-from helio_control.bringup import simulated_graph, start_graph
+from helio_control.bringup import simulated_graph, start_graph, wait_until_up
 from helio_control.recorder import Recorder, recorder_subscribed
 from helio_msgs.action import MoveArm, MoveWrist
 from helio_msgs.msg import DeviceStatus, ThermalStats
@@ -154,6 +154,7 @@ def record_fixture(name, out_dir, work_dir):
         group = start_graph(specs, log_dir=logs, on_death=lambda process: graph.fail(
             f'{process.label} died: {process.tail()}'))
         try:
+            wait_until_up(graph, specs, TIMEOUT)
             client = FixtureClient(graph, rig)
             recorder = Recorder(bag, use_sim_time=True, log_dir=logs, chunk_period=1.0,
                                 **RECORDING).start()

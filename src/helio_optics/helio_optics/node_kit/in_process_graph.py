@@ -245,6 +245,31 @@ class InProcessGraph:
             raise AssertionError(f'goal {goal} was rejected')
         return self.goal_result(handle, timeout)
 
+    def wait_for_nodes(self, names, timeout=DEFAULT_TIMEOUT):
+        """
+        Wait until every node of `names` (relative to the namespace) answers a parameter read.
+
+        A node answers its ``get_parameters`` service only once its constructor is done and
+        its executor spins, so this waits out each node's start-up (imports, warm-up, opened
+        ports), not merely its appearance in the graph. One deadline for all; GraphTimeout
+        names the nodes that did not answer.
+        """
+        from rcl_interfaces.srv import GetParameters
+        deadline = time.monotonic() + timeout
+        waiting = list(names)
+        while waiting:
+            name = waiting[0]
+            client = self.helper.create_client(GetParameters, f'{name}/get_parameters')
+            try:
+                self.call(client, GetParameters.Request(names=['use_sim_time']),
+                          max(deadline - time.monotonic(), 0.0))
+            except GraphTimeout:
+                raise GraphTimeout(f'node(s) {", ".join(waiting)} did not answer within '
+                                   f'{timeout:g} s (not started, or still starting)') from None
+            finally:
+                self.helper.destroy_client(client)
+            waiting.pop(0)
+
     def wait_until(self, condition, timeout=DEFAULT_TIMEOUT, what='the condition'):
         """
         Wait until `condition()` holds; raise GraphTimeout naming `what` on timeout.
