@@ -1,21 +1,12 @@
 """
-The live Foxglove view (issue 33): the view bridge beside the simulated graph painting.
+The live Foxglove view (issue 33): the view bridge's pieces, and its parameter file.
 
-One graph (the painter's nodes, the world at 6x). A first goal paints one dot with no bridge
-running (it also calibrates robot-world and sweeps for the sun, as a painting's start does).
-Then the bridge starts (port 0: the OS picks one) and three clients connect over the
-Foxglove WebSocket protocol (``foxglove_ws``, written from the protocol's text): one reads
-everything, one subscribes and never reads again (a slow client), one subscribes and
-vanishes. A second goal paints one dot, a third another. The reading client must receive
-well-formed messages of the advertised schemas on the annotated RGB, thermal and scene
-channels while those dots are painted, and the painter's per-dot figures (dwell and the time
-from the move to the cool-down, simulated seconds, from its journal) must stay within noise
-of the dot without the bridge. The figures are printed.
-
-The recorder records the whole run, as ``helio paint`` does: the bag opens with ``rosbags``
-and ``mcap``'s reader, and the view's drawings (``view.mcap`` in the bag directory) hold
-the annotation and scene topics. The shipped layout (config/foxglove/helio.json) names only
-topics that both the live bridge and the recording carry.
+The bridge beside the simulated graph painting is tested in ``test_painter.py``'s graph
+(``test_the_view_bridge_streams_the_painting_and_leaves_its_timing_alone``), as the graph
+is started, calibrated and its sun estimated there once for every painting test. This module
+holds what that test uses: the bridge process on a free port (``start_bridge``), the
+painted dot (``paint_dot``), the checks of the streamed channels (``well_formed``), of the
+recording (``check_recording``) and of the shipped layout (``layout_topics``).
 """
 
 import glob
@@ -25,25 +16,19 @@ from pathlib import Path
 import re
 import time
 
-from conftest import graph_of_processes, REPO
-from foxglove_ws import FoxgloveClient
+from conftest import REPO
 from geometry_msgs.msg import Point
 from helio_control.bag_files import bag_file, VIEW_FILE
 from helio_control.bringup import node_environment
-from helio_control.recorder import Recorder
 from helio_control.run_journal import read_journal
 from helio_control.view_scene import schema_errors
 from helio_msgs.action import PaintPattern
 from helio_optics.node_kit.processes import NodeProcess
 from mcap.reader import make_reader
-import pytest
 from rclpy.serialization import deserialize_message
 from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import Image
 
-NODES = ('sim_world', 'dobot_driver', 'servo_driver', 'spot_detector', 'thermal_monitor',
-         'sun_estimator', 'lens_planner', 'painter')
-WORLD = {'sim_world': {'real_time_factor': 6.0, 'flux_rays': 20000}}
 CHECKED = ('/view/rgb/annotations', '/view/thermal/annotations', '/view/scene',
            '/rgb/image_raw', '/thermal/image_raw')
 TIMEOUT = 600.0
@@ -103,64 +88,6 @@ def well_formed(client, topic):
             image = deserialize_message(message, Image)
             assert image.width > 0 and len(image.data) == image.step * image.height
     return messages
-
-
-def test_the_bridge_streams_the_painting_and_leaves_its_timing_alone(tmp_path):
-    bag = str(tmp_path / 'recording')
-    with graph_of_processes(tmp_path, NODES, WORLD) as (_, graph):
-        painter = graph.action_client(PaintPattern, 'paint', 120.0)
-        recorder = Recorder(bag, use_sim_time=True, log_dir=str(tmp_path / 'logs'),
-                            chunk_period=0.5, env=node_environment()).start(60.0)
-        alone, alone_wall = paint_dot(graph, painter, tmp_path / 'alone', 0.05, 0.05)
-        bridge, port = start_bridge(tmp_path)
-        reader = FoxgloveClient(port, CHECKED)
-        slow = FoxgloveClient(port, CHECKED, read=False)
-        vanished = FoxgloveClient(port, CHECKED)
-        try:
-            assert all(c.subscribed.wait(30.0) for c in (reader, slow, vanished))
-            vanished.close()
-            cpu_before = cpu_seconds(bridge.pid)
-            watched, watched_wall = paint_dot(graph, painter, tmp_path / 'watched', 0.06, 0.05)
-            bridge_cpu = cpu_seconds(bridge.pid) - cpu_before
-            reader.wait_for({'/view/rgb/annotations': 1, '/view/thermal/annotations': 1,
-                             '/view/scene': 1}, 60.0)
-            counts = {topic: len(reader.messages[topic]) for topic in CHECKED}
-        finally:
-            for client in (reader, slow):
-                client.close()
-            bridge.stop()
-            recorder.stop()
-        assert bridge.returncode() in (0, -2), bridge.tail()
-
-    rgb = well_formed(reader, '/view/rgb/annotations')
-    thermal = well_formed(reader, '/view/thermal/annotations')
-    scenes = well_formed(reader, '/view/scene')
-    well_formed(reader, '/rgb/image_raw')
-    well_formed(reader, '/thermal/image_raw')
-    # what was drawn: the marker outline on the RGB image, the hottest point on the thermal,
-    # the panel, marker and the lens and camera frames in the scene
-    assert any(message['points'] for message in rgb)
-    assert all(message['circles'] for message in thermal)
-    ids = {entity['id'] for scene in scenes for entity in scene['entities']}
-    assert {'panel', 'marker', 'targets', 'lens', 'rgb_camera', 'thermal_camera',
-            'sun_estimate'} <= ids
-    # annotations are stamped as the image they belong to
-    image_stamps = {stamp for stamp, _ in reader.messages['/rgb/image_raw']}
-    assert {stamp for stamp, _ in reader.messages['/view/rgb/annotations']} <= image_stamps
-
-    print(f'\nmessages received per channel while a dot was painted: {counts}')
-    print(f'the bridge used {bridge_cpu:.1f} s of CPU in {watched_wall:.1f} s '
-          f'({100 * bridge_cpu / watched_wall:.0f} % of one core)')
-    for name, dot, wall in (('no bridge', alone, alone_wall),
-                            ('bridge, 3 clients (1 slow, 1 gone)', watched, watched_wall)):
-        print(f'{name}: dwell {dot.dwell:.2f} s, move to cool-down {dot.end - dot.start:.2f} s '
-              f'(simulated), goal {wall:.1f} s wall')
-    assert watched.dwell == pytest.approx(alone.dwell, rel=0.5)
-    assert watched.end - watched.start == pytest.approx(alone.end - alone.start, rel=0.5)
-
-    recorded = check_recording(bag)
-    assert layout_topics() <= recorded
-    assert layout_topics() <= set(reader.channels)
 
 
 def test_the_parameter_file_holds_the_code_defaults():

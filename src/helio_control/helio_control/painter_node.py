@@ -113,6 +113,8 @@ from std_msgs.msg import Header
 
 RELIABLE = reliable(20)
 COOLING_RULES = ('paper', 'window')
+# how a retreat that found no way to take the focus off the wood begins its account
+RETREAT_FAILED = 'RETREAT FAILED'
 # Goal fields that do not change what is painted (a resumed goal may differ in them).
 NOT_THE_PICTURE = ('run_dir', 'fresh', 'start_index', 'dry_run')
 # A steady tick this late says the painter itself did not run (DriverSilence): at most this,
@@ -279,6 +281,13 @@ class PainterNode(Node):
             'A focus or wrist goal not accepted within this (wall clock) fails the painting, '
             'which then retreats: a killed server stays discovered for seconds and never '
             'answers [s].', 0.1, 600.0)
+        self.retreat_retry_time = declare(
+            self, 'retreat_retry_time', 10.0,
+            'A retreat that failed every way (both devices at fault) is tried again for this '
+            'long (wall clock), until one way works [s].', 0.0, 600.0)
+        self.retreat_retry_period = declare(
+            self, 'retreat_retry_period', 0.2,
+            'Between those tries (wall clock) [s].', 0.01, 10.0)
         self.retreat_accept_timeout = declare(
             self, 'retreat_accept_timeout', 0.25,
             'A retreat goal not accepted within this (wall clock) goes to the next way of '
@@ -302,9 +311,10 @@ class PainterNode(Node):
             'A dot the camera finds not charred is heated again at most this often, then '
             'counted as failed [-].', 0, 5)
         self.verify_timeout = declare(
-            self, 'verify_timeout', 2.0,
-            'Wait at most this long (wall clock) for an RGB frame after a dot; without one '
-            'the dot is recorded as not verified [s].', 0.1, 60.0)
+            self, 'verify_timeout', 5.0,
+            'Wait at most this long (wall clock) for an RGB frame after a dot, the camera '
+            'subscribed to from then on; without one the dot is recorded as not verified '
+            '[s].', 0.1, 60.0)
         self.char_settings = CharSettings(
             dark_ratio=declare(self, 'verify.dark_ratio', 0.6,
                                "Char: darker than this share of the bare wood's light around "
@@ -326,9 +336,10 @@ class PainterNode(Node):
         self.verified_dots = []
         self.create_subscription(CameraInfo, 'rgb/camera_info', self._on_rgb_info,
                                  qos_profile_sensor_data)
-        # raw: a frame is decoded only when a verification waits for it
-        self.create_subscription(Image, 'rgb/image_raw', self._on_frame,
-                                 qos_profile_sensor_data, raw=True)
+        # subscribed only while a verification waits for a frame (``_verify``): every RGB
+        # frame taken is a megabyte copied out of DDS, 30 a second beside a world at 6x, and
+        # the painter took a tenth of a core doing so while it heated
+        self._frames = None
 
         self.sun_max_sigma = declare(
             self, 'sun_max_sigma', 0.2,
@@ -568,13 +579,39 @@ class PainterNode(Node):
         return result
 
     async def _retreat(self, why):
-        """Put the focus off the wood; return what was done (never raises)."""
+        """
+        Put the focus off the wood; return what was done (never raises).
+
+        A retreat that failed every way (``_retreat_once``: both devices at fault at that
+        moment, e.g. the Dobot's link reset while the servo driver is dead) is tried again
+        every ``retreat_retry_period`` of wall time, with the devices as they are then, for
+        up to ``retreat_retry_time``: a lens is never left focused on the wood while a way
+        may come back (a driver reconnects within a second of a link reset). Not under the
+        emergency stop, whose drivers refuse every goal and turn the lens away themselves.
+        """
+        deadline = time.monotonic() + self.retreat_retry_time
+        done = await self._retreat_once(why)
+        first, tries = done, 1
+        # not under the emergency stop: the drivers refuse every goal and take the focus off
+        # the wood themselves
+        while done.startswith(RETREAT_FAILED) and time.monotonic() < deadline \
+                and self.context.ok() and not self.emergency.engaged:
+            self.get_logger().warning(f'{done}: trying again', throttle_duration_sec=2.0)
+            await sleep(self, self.retreat_retry_period, wall=True)
+            done = await self._retreat_once(why)
+            tries += 1
+        return done if tries == 1 else f'{done} (at the try {tries}; the first: {first})'
+
+    async def _retreat_once(self, why):
+        """Put the focus off the wood the first way that works; say what was done."""
         if self._at_heating is None:
             return 'the lens was not at the heating distance'
         target, d_lp = self._at_heating
         arm_fault = self.faults.get('dobot') or self._silent_devices().get('dobot')
         wrist_fault = self.faults.get('servo') or self._silent_devices().get('servo')
-        if wrist_fault and not arm_fault:  # the wrist cannot move: the arm lifts the lens
+        if wrist_fault and arm_fault:      # nothing can move the lens now: tried again
+            return f'{RETREAT_FAILED}: {arm_fault}; {wrist_fault}'
+        if wrist_fault:                    # the wrist cannot move: the arm lifts the lens
             return await self._lift(wrist_fault)
         if arm_fault:                     # the arm cannot move: straight to the wrist
             failure = arm_fault
@@ -599,9 +636,9 @@ class PainterNode(Node):
             if result.success:
                 self._at_heating = None
                 return f'the arm could not retreat ({failure}); the wrist turned the lens away'
-            return f'RETREAT FAILED: {failure}; the wrist: {result.message}'
+            return f'{RETREAT_FAILED}: {failure}; the wrist: {result.message}'
         except PaintFailed as error:
-            return f'RETREAT FAILED: {failure}; the wrist: {error}'
+            return f'{RETREAT_FAILED}: {failure}; the wrist: {error}'
 
     async def _lift(self, wrist_fault):
         """
@@ -621,9 +658,9 @@ class PainterNode(Node):
                 *(float(v) for v in joints), float(self.joints_now.get('dobot_j4', 0.0))])
             result = await self._run_action(self.arm, 'move_arm', goal, urgent=True, last=True)
         except (UnreachableError, PaintFailed) as error:
-            return f'RETREAT FAILED: {wrist_fault}; the arm could not lift the lens: {error}'
+            return f'{RETREAT_FAILED}: {wrist_fault}; the arm could not lift the lens: {error}'
         if not result.success:
-            return (f'RETREAT FAILED: {wrist_fault}; the arm could not lift the lens: '
+            return (f'{RETREAT_FAILED}: {wrist_fault}; the arm could not lift the lens: '
                     f'{result.message}')
         self._at_heating = None
         return f'the wrist could not move ({wrist_fault}); the arm lifted the lens'
@@ -1008,6 +1045,10 @@ class PainterNode(Node):
             return None, 'no joint states'
         since = self._now()
         waiter = FirstOf()
+        if self._frames is None:
+            # raw: a frame is decoded only when a verification waits for it
+            self._frames = self.create_subscription(Image, 'rgb/image_raw', self._on_frame,
+                                                    qos_profile_sensor_data, raw=True)
         self._frame_waiters.append((since, waiter))
         timer = self.create_timer(self.verify_timeout, lambda: waiter.offer(None),
                                   clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -1016,6 +1057,9 @@ class PainterNode(Node):
         finally:
             self._frame_waiters.remove((since, waiter))
             self.destroy_timer(timer)
+            if not self._frame_waiters and self._frames is not None:
+                self.destroy_subscription(self._frames)
+                self._frames = None
         self._check()
         if frame is None:
             return None, f'no RGB frame within {self.verify_timeout:g} s'
