@@ -297,4 +297,3 @@ class FakeLensRig(LensRigPort):
 def sun_at(elevation_deg, azimuth_deg):
     """Return the sun ray (robot frame) at this elevation and robot-frame azimuth."""
     return sun_sweep.sun_ray(math.radians(elevation_deg), math.radians(azimuth_deg))
-
