@@ -1,52 +1,43 @@
 """
 Node lens_planner: place the lens so the focus lands on a point, and calibrate the rig.
 
-Actions (one goal at a time across all four; a second is aborted with "busy"):
+Actions (one goal at a time across all five; a second is aborted with "busy"), each a
+procedure of ``helio_control.procedures`` run against this node's side of their port
+(``node_lens_rig.NodeLensRig``, a ``LensRigPort``):
 
-- ``focus`` (helio_msgs/FocusLens, paper Eqs 14-15): world target + d_lp -> the lens pose
-  from the sun estimate (``sun/estimate``, kept current by Eq 18), corrected so the spot's
-  power centre (not only the lens axis) lands on the target (``FocusTargeting``) -> the five
-  joints by the rig's inverse kinematics -> ``move_arm`` and ``move_wrist`` together, in legs
-  that keep the focus off the wood while it travels (``lens_moves``: retreat, travel at the
-  travel distance, approach). The result holds the pose reached (forward kinematics of the
-  joints the drivers report) and its distance from the commanded one.
-- ``calibrate_world`` (CalibrateWorld, Sec. II-B): poses from which the RGB camera sees the
-  marker; each marker pose with the kinematic camera pose gives T_robot_world
-  (``world_calibration``); published on ``calibration/world_pose`` (transient local), saved,
-  and used from then on by this node (and every node that follows the topic).
-- ``sweep_sun`` (SweepSun, Sec. V-B): acquire the spot when there is no estimate (the
-  ephemeris' elevation, a ring of azimuth guesses; the first spot seen gives a coarse sun,
-  its pose's lens model solved for it: ``sun_sweep.coarse_sun``), sweep poses that change
-  the geometry (``sun_sweep``), call ``estimate_sun`` on the sweep's spots.
-- ``calibrate_focus`` (CalibrateFocus, Sec. V-A): lens aligned with the estimated sun, d_lp
-  swept, A_c from the spot detector, fit (``helio_optics.focal_calibration``); the heating
-  distance published on ``calibration/focus`` (transient local) and saved; the lens model's
-  focal length is scaled so its focus falls where the sweep found it.
+- ``focus`` (helio_msgs/FocusLens, paper Eqs 14-15): ``procedures.focus``; the lens pose
+  from the sun estimate (``sun/estimate``, kept current by Eq 18) reached in legs that keep
+  the focus off the wood while it travels.
+- ``calibrate_world`` (CalibrateWorld, Sec. II-B): ``procedures.world_calibration_run``;
+  T_robot_world published on ``calibration/world_pose`` (transient local) and saved.
+- ``calibrate_rig`` (CalibrateRig, issue 28): ``procedures.rig_calibration_run``; the rig as
+  built published on ``calibration/rig`` (transient local) and saved.
+- ``sweep_sun`` (SweepSun, Sec. V-B): ``procedures.sun_sweep_run``; acquire the spot, sweep,
+  call ``estimate_sun`` on the sweep's spots.
+- ``calibrate_focus`` (CalibrateFocus, Sec. V-A): ``procedures.focal_calibration_run``; the
+  heating distance published on ``calibration/focus`` (transient local) and saved.
 
 Every goal is checked first: no sun estimate, a non-finite or unreachable target (which
 joint, by how much), no joint states: the goal is aborted at once with the reason. A cancel
 cancels the driver goals (the drivers stop the arm and hold the servos) and ends the goal.
-
-The procedures live in ``helio_control.procedures`` (one module each, no rclpy) and talk to
-the rig through one port (``LensRigPort``), which this node implements per goal
-(``NodeLensRig``: the driver actions, the spot stream, estimate_sun, the calibration topics
-and files); the node keeps the parameters, the subscriptions and the action wiring.
+The node keeps the parameters (the procedures' in ``lens_planner_parameters``), the
+subscriptions, the action wiring, the calibrations read back at start, and the focus lease:
+a lens left at the heating distance is retreated when its client falls silent or the node
+is stopped, and beats on ``lens/heating`` while it is there.
 
 Execute callbacks are coroutines that await the driver actions, the estimator service, the
 spot stream and node-clock timers; nothing blocks, and the node runs in a plain
 ``rclpy.spin`` (one thread).
 """
-
 import math
 import os
 import time
-import traceback
 
 from geometry_msgs.msg import PoseStamped
 from helio_control.calibration_store import CalibrationRefused, load_calibration
 from helio_control.calibration_store import rig_description, save_calibration
 from helio_control.lens_planner_parameters import declare_heating_distance, declare_settings
-from helio_control.node_lens_rig import NodeLensRig, UNATTENDED
+from helio_control.node_lens_rig import goal_runner, NodeLensRig, UNATTENDED
 from helio_control.procedures import focus
 from helio_control.procedures.focal_calibration_run import calibrate_focus, scaled_lens
 from helio_control.procedures.lens_rig_port import GoalCanceled, GoalFailed
@@ -58,7 +49,6 @@ from helio_msgs.action import (CalibrateFocus, CalibrateRig, CalibrateWorld, Foc
 from helio_msgs.msg import FocalCalibration, SpotObservation, SunEstimate
 from helio_msgs.srv import EstimateSun
 from helio_optics.focus_targeting import FocusTargeting
-from helio_optics.node_kit import emergency_stop
 from helio_optics.node_kit.awaitables import FirstOf, sleep
 from helio_optics.node_kit.conversions import camera_from_info, matrix_to_pose
 from helio_optics.node_kit.conversions import point_to_array
@@ -144,7 +134,7 @@ class LensPlannerNode(Node):
         self.sun = None                      # latest trustworthy SunEstimate
         self.camera = None
         self.camera_seen = FirstOf()        # done at the first rgb/camera_info
-        self._busy = False
+        self.busy = False
         self.at_heating = False             # a focus left the lens at the heating distance
         self.interrupt_timeout = declare(
             self, 'interrupt_timeout', 5.0,
@@ -191,7 +181,7 @@ class LensPlannerNode(Node):
                 (CalibrateRig, 'calibrate_rig', calibrate_rig),
                 (SweepSun, 'sweep_sun', sweep_sun),
                 (CalibrateFocus, 'calibrate_focus', calibrate_focus)):
-            ActionServer(self, action_type, name, self._guarded(action_type, execute),
+            ActionServer(self, action_type, name, goal_runner(self, action_type, execute),
                          goal_callback=lambda goal: GoalResponse.ACCEPT,
                          cancel_callback=self._on_cancel)
         if load_calibrations:
@@ -298,11 +288,11 @@ class LensPlannerNode(Node):
     def _check_lease(self):
         """Retreat a lens left at the heating distance by a client that went silent."""
         now, wall_now = self.now(), time.monotonic()
-        if self._busy or not self.lease.expired(now, wall_now):
+        if self.busy or not self.lease.expired(now, wall_now):
             return
         silence, wall_silence = self.lease.silence(now, wall_now)
         self.lease.disarm()
-        self._busy = True
+        self.busy = True
         self.get_logger().error(
             f'the heartbeat of the client the lens is focused for is silent ({silence:.2f} s '
             f'node clock, {wall_silence:.2f} s wall): retreating the lens')
@@ -317,12 +307,12 @@ class LensPlannerNode(Node):
         left the lens at the heating distance, the lens is moved to the travel distance as
         when a client's lease expires. At most ``interrupt_timeout`` [s wall] in all.
         """
-        while self._busy:
+        while self.busy:
             await sleep(self, 0.02, wall=True)
         if not self.at_heating:
             return
         self.lease.disarm()
-        self._busy = True
+        self.busy = True
         self.get_logger().warning('stopping with the lens at the heating distance: retreating')
         await self._lease_retreat()
 
@@ -335,7 +325,7 @@ class LensPlannerNode(Node):
         except (GoalFailed, GoalCanceled) as error:
             self.get_logger().error(f'the lens could not be retreated: {error}')
         finally:
-            self._busy = False
+            self.busy = False
 
     def _on_sun(self, message):
         if message.converged:
@@ -363,45 +353,6 @@ class LensPlannerNode(Node):
     def now(self):
         """Return the node clock [s]."""
         return self.get_clock().now().nanoseconds * 1e-9
-
-    def _guarded(self, action_type, execute):
-        """Wrap a procedure: one goal at a time, failures and cancels become results."""
-        async def run(goal_handle):
-            result = action_type.Result()
-            if self._busy or self.emergency.engaged:
-                result.success = False
-                result.message = (emergency_stop.refusal(f'{action_type.__name__} goal')
-                                  if self.emergency.engaged
-                                  else 'busy: another lens_planner goal runs')
-                goal_handle.abort()
-                return result
-            self._busy = True
-            if action_type is not FocusLens:
-                self.lease.disarm()       # its own procedure: no client's focus to guard
-                self.at_heating = False
-            try:
-                await execute(NodeLensRig(self, goal_handle), goal_handle.request, result)
-                result.success = True
-                goal_handle.succeed()
-            except GoalCanceled:
-                result.success, result.message = False, 'canceled; the devices were stopped'
-                goal_handle.canceled()
-            except GoalFailed as failure:
-                result.success, result.message = False, str(failure)
-                goal_handle.abort()
-            except Exception as error:      # a bug: end the goal with what happened
-                result.success = False
-                result.message = f'internal error: {type(error).__name__}: {error}'
-                self.get_logger().error(traceback.format_exc())
-                goal_handle.abort()
-            finally:
-                self._busy = False
-            if result.success:
-                self.get_logger().info(f'{action_type.__name__}: {result.message}')
-            else:
-                self.get_logger().warning(f'{action_type.__name__}: {result.message}')
-            return result
-        return run
 
     def sun_ray(self):
         """Return the sun estimate's ray s0 (robot frame); GoalFailed when none came."""

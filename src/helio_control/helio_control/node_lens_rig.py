@@ -10,11 +10,13 @@ the node's one-thread ``rclpy.spin``.
 """
 
 import time
+import traceback
 
 from action_msgs.msg import GoalStatus
 from helio_control.procedures.lens_rig_port import GoalCanceled, GoalFailed, LensRigPort
-from helio_msgs.action import MoveArm, MoveWrist
+from helio_msgs.action import FocusLens, MoveArm, MoveWrist
 from helio_msgs.srv import EstimateSun
+from helio_optics.node_kit import emergency_stop
 from helio_optics.node_kit.awaitables import discovered, FirstOf, in_thread, sleep, within
 from helio_optics.node_kit.conversions import stamp_from_seconds, stamp_to_seconds
 import numpy as np
@@ -49,6 +51,53 @@ class SpotWaiter:
             self.refused[reason] = self.refused.get(reason, 0) + 1
         if len(self.messages) >= self.count:
             self.future.offer(self.messages)
+
+
+def goal_runner(node, action_type, execute):
+    """
+    Return the execute callback of `node`'s action server running the procedure `execute`.
+
+    One goal at a time on the node (``node.busy``; none while the emergency stop is
+    engaged); the procedure gets a ``NodeLensRig`` of the goal; a ``GoalFailed`` or
+    ``GoalCanceled`` ends the goal with its message, another exception as an internal error.
+    A procedure other than a focus first disarms the focus lease (no client's lens to guard).
+    """
+    async def run(goal_handle):
+        result = action_type.Result()
+        if node.busy or node.emergency.engaged:
+            result.success = False
+            result.message = (emergency_stop.refusal(f'{action_type.__name__} goal')
+                              if node.emergency.engaged
+                              else 'busy: another lens_planner goal runs')
+            goal_handle.abort()
+            return result
+        node.busy = True
+        if action_type is not FocusLens:
+            node.lease.disarm()       # its own procedure: no client's focus to guard
+            node.at_heating = False
+        try:
+            await execute(NodeLensRig(node, goal_handle), goal_handle.request, result)
+            result.success = True
+            goal_handle.succeed()
+        except GoalCanceled:
+            result.success, result.message = False, 'canceled; the devices were stopped'
+            goal_handle.canceled()
+        except GoalFailed as failure:
+            result.success, result.message = False, str(failure)
+            goal_handle.abort()
+        except Exception as error:      # a bug: end the goal with what happened
+            result.success = False
+            result.message = f'internal error: {type(error).__name__}: {error}'
+            node.get_logger().error(traceback.format_exc())
+            goal_handle.abort()
+        finally:
+            node.busy = False
+        if result.success:
+            node.get_logger().info(f'{action_type.__name__}: {result.message}')
+        else:
+            node.get_logger().warning(f'{action_type.__name__}: {result.message}')
+        return result
+    return run
 
 
 class NodeLensRig(LensRigPort):
