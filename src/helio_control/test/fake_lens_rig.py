@@ -75,13 +75,13 @@ class FakeLensRig(LensRigPort):
     goes), `true_lens` (default the lens file's). The beliefs: `believed_rig` (default the
     rig file), `believed_sun` (a known estimate, or None), `world_calibrated`.
     `marker_noise` (position [m], angle [rad]) and `spot_noise` [m] per frame, from `seed`.
-    `cancel_after` moves, the goal is canceled.
+    `cancel_after` moves, the goal is canceled. Under `clouds` no spot is ever seen.
     """
 
     def __init__(self, true_sun, true_rig=None, true_joints=None, true_lens=None,
                  believed_rig=None, believed_sun=None, world_calibrated=False,
                  settings=None, marker_noise=(0.0, 0.0), spot_noise=0.0, seed=0,
-                 cancel_after=None, x_start=None):
+                 cancel_after=None, clouds=False, x_start=None):
         """Build the model and the planner's beliefs (see the class docstring)."""
         self.settings = settings or LensPlannerSettings(view_points=tuple(
             sun_sweep.view_points()))
@@ -101,7 +101,7 @@ class FakeLensRig(LensRigPort):
         self.sun = None if believed_sun is None else np.asarray(believed_sun, dtype=float)
         self.marker_noise, self.spot_noise = marker_noise, spot_noise
         self.rng = np.random.default_rng(seed)
-        self.cancel_after = cancel_after
+        self.cancel_after, self.clouds = cancel_after, clouds
         self.time = START
         self.x = np.asarray(x_start if x_start is not None else [0.0, 0.3, 0.3, 0.0, 0.0],
                             dtype=float)
@@ -130,7 +130,7 @@ class FakeLensRig(LensRigPort):
 
     def _sees(self, x):
         """Tell whether the true camera sees the spot (and the marker) from joints x."""
-        return sun_sweep.sees_marker_and_spot(
+        return not self.clouds and sun_sweep.sees_marker_and_spot(
             self.true_rig, self.true_joints(x), self.true_sun, CAMERA, self.T_true_robot_world,
             self.settings.marker_side, self.settings.view_margin, need_marker=False)
 

@@ -79,7 +79,6 @@ def test_a_bad_sweep_is_refused_before_any_move(fields, words):
 
 
 def test_no_spot_at_all_fails_saying_how_many_distances_gave_one():
-    rig = FakeLensRig(SUN, believed_sun=SUN, world_calibrated=True)
-    rig._sees = lambda x: False
+    rig = FakeLensRig(SUN, believed_sun=SUN, world_calibrated=True, clouds=True)
     with pytest.raises(GoalFailed, match=r'focal calibration: .*\(0 of 21 distances'):
         run(calibrate_focus(rig, request(), CalibrateFocus.Result()))

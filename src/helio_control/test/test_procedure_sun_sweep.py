@@ -17,6 +17,7 @@ from helio_control.procedures.sun_sweep_run import utc
 from helio_msgs.action import SweepSun
 from helio_optics.config_files import config_path
 from helio_optics.ephemeris import load_site, sun_position
+from helio_optics.spot import spot_area, spot_area_at
 import numpy as np
 import pytest
 
@@ -47,8 +48,19 @@ def test_without_an_estimate_the_spot_is_found_and_the_sweep_measures_the_sun(az
 
 
 def test_no_acquisition_pose_holds_the_focus_on_the_wood():
-    # the acquisition poses are planned with a guessed sun: each keeps its distance
-    assert all(abs(offset) > 0.015 for offset in ACQUISITION_D_LP_OFFSETS)
+    # the search poses are planned with guessed suns, up to 15 deg off: under the true sun
+    # each casts a spot at least ten times the focused one's area (1.5 mm^2)
+    rig = FakeLensRig(sun_at(ELEVATION, 160.0), world_calibrated=True)
+    run(sweep_sun(rig, SweepSun.Goal(), SweepSun.Result()))
+    searched = rig.moves[:-6]
+    assert searched
+    focused = spot_area_at(rig.true_lens, 0.082)
+    T = rig.T_true_robot_world
+    for x in searched:
+        area = spot_area(rig.true_lens, rig.true_sun, rig.true_pose(x).T_robot_lens,
+                         T[:3, 3], T[:3, 2])
+        assert area > 10.0 * focused
+    assert all(abs(offset) > rig.settings.safe_margin for offset in ACQUISITION_D_LP_OFFSETS)
 
 
 def test_with_an_estimate_the_sweep_goes_around_it_without_searching():
@@ -63,9 +75,7 @@ def test_with_an_estimate_the_sweep_goes_around_it_without_searching():
 
 
 def test_a_sun_under_clouds_is_never_found():
-    # the model's spot lands nowhere the camera sees (the sun below the lens' reach)
-    rig = FakeLensRig(sun_at(ELEVATION, 230.0), world_calibrated=True)
-    rig._sees = lambda x: False
+    rig = FakeLensRig(sun_at(ELEVATION, 230.0), world_calibrated=True, clouds=True)
     with pytest.raises(GoalFailed, match='the spot was not found at any of'):
         run(sweep_sun(rig, SweepSun.Goal(), SweepSun.Result()))
     assert rig.sun is None

@@ -23,12 +23,12 @@ import numpy as np
 # a sun this low or lower casts a spot too long and too faint to paint with
 MIN_SUN_ELEVATION = math.radians(5.0)
 # The lens-panel distances of the spot search, as offsets from the heating distance [m],
-# tried in this order for each azimuth guess (``sun_sweep.acquisition_poses``): the guess may
-# be far off, so no search pose holds the focus on the wood. First 1.6 cm and 2.2 cm nearer
-# the panel (just past and farther past ``safe_margin``, 1.5 cm: a spot 7-10 mm across for
-# the 38 mm lens, bright enough for the detector and seen with the marker from close), then
-# the paper's retreat of 3 cm above the heating distance (Sec. V-A) where those are out of
-# reach or out of view.
+# tried in this order for each azimuth guess (``sun_sweep.acquisition_poses``). The guess
+# may be far off the sun, so no search pose holds the focus on the wood: every one lies more
+# than ``safe_margin`` (1.5 cm) from the heating distance, where the spot of the 38 mm lens
+# is 7.5-10 mm across (45-85 mm^2 against 1.5 mm^2 in focus: ``spot.spot_area_at``). First
+# 1.6 and 2.2 cm nearer the panel, then the paper's heating-stop offset (Sec. IV-B:
+# d_lp + 3 cm, a 16 mm spot) where those are out of reach or out of view.
 ACQUISITION_D_LP_OFFSETS = (-0.016, -0.022, 0.03)
 # at least this many sweep poses that show the marker and the spot make a sweep
 MIN_SWEEP_POSES = 2
