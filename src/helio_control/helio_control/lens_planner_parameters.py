@@ -4,9 +4,11 @@ The lens planner's parameters its procedures use, declared on the node (issue 32
 ``declare_settings`` declares them (``node_kit.parameters.declare``: default, range and
 description, as in ``config/lens_planner.yaml``) and returns the procedures'
 ``LensPlannerSettings``; the node declares its own wiring parameters itself.
+``code_defaults`` gives the same without a node, at the defaults (for tests and tools).
 """
 
 import math
+from types import SimpleNamespace
 
 from helio_control import sun_sweep
 from helio_control.procedures.lens_rig_port import LensPlannerSettings
@@ -99,3 +101,16 @@ def declare_settings(node):
         sweep_count=sweep_count, sweep_tilts=tuple(sweep_tilts),
         sweep_distances=tuple(sweep_distances), acquire_step=acquire_step,
         focus_sweep=focus_sweep)
+
+
+class _CodeDefaults:
+    """A stand-in for a node that takes every parameter at its declared default."""
+
+    def declare_parameter(self, name, value, descriptor=None):
+        """Return the parameter at its default."""
+        return SimpleNamespace(value=value)
+
+
+def code_defaults(declare_them):
+    """Return what `declare_them(node)` returns with every parameter at its default."""
+    return declare_them(_CodeDefaults())

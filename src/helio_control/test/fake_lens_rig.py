@@ -18,9 +18,10 @@ import math
 from types import SimpleNamespace
 
 from helio_control import sun_sweep
+from helio_control.lens_planner_parameters import code_defaults, declare_heating_distance
+from helio_control.lens_planner_parameters import declare_settings
 from helio_control.procedures.focal_calibration_run import scaled_lens
-from helio_control.procedures.lens_rig_port import (GoalCanceled, GoalFailed,
-                                                    LensPlannerSettings, LensRigPort)
+from helio_control.procedures.lens_rig_port import GoalCanceled, GoalFailed, LensRigPort
 from helio_msgs.msg import SpotObservation
 from helio_msgs.srv import EstimateSun
 from helio_optics.config_files import config_path
@@ -75,7 +76,8 @@ class FakeLensRig(LensRigPort):
     goes), `true_lens` (default the lens file's). The beliefs: `believed_rig` (default the
     rig file), `believed_sun` (a known estimate, or None), `world_calibrated`.
     `marker_noise` (position [m], angle [rad]) and `spot_noise` [m] per frame, from `seed`.
-    `cancel_after` moves, the goal is canceled. Under `clouds` no spot is ever seen.
+    `cancel_after` moves, the goal is canceled. Under `clouds` no spot is ever seen. The
+    `settings` default to the lens planner's defaults.
     """
 
     def __init__(self, true_sun, true_rig=None, true_joints=None, true_lens=None,
@@ -83,8 +85,7 @@ class FakeLensRig(LensRigPort):
                  settings=None, marker_noise=(0.0, 0.0), spot_noise=0.0, seed=0,
                  cancel_after=None, clouds=False, x_start=None):
         """Build the model and the planner's beliefs (see the class docstring)."""
-        self.settings = settings or LensPlannerSettings(view_points=tuple(
-            sun_sweep.view_points()))
+        self.settings = settings or code_defaults(declare_settings)
         self.lens = load_lens_parameters(config_path('lens.yaml'))
         self.true_lens = true_lens or self.lens
         self.true_spot_model = SpotModel(self.true_lens)
@@ -96,7 +97,7 @@ class FakeLensRig(LensRigPort):
         self.spot_model = SpotModel(self.lens)
         self.targeting = FocusTargeting(self.rig, self.lens, rays=1000)
         self.site = load_site(config_path('site.yaml'))
-        self.heating_distance = 0.082
+        self.heating_distance = code_defaults(declare_heating_distance)
         self.world_calibrated = world_calibrated
         self.sun = None if believed_sun is None else np.asarray(believed_sun, dtype=float)
         self.marker_noise, self.spot_noise = marker_noise, spot_noise

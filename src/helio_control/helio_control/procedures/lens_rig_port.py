@@ -14,7 +14,6 @@ A procedure ends with a ``GoalFailed`` (its message is the goal's result message
 
 import abc
 from dataclasses import dataclass
-import math
 
 
 class GoalFailed(Exception):
@@ -27,26 +26,31 @@ class GoalCanceled(Exception):
 
 @dataclass(frozen=True)
 class LensPlannerSettings:
-    """The lens planner's parameters the procedures use (``config/lens_planner.yaml``)."""
+    """
+    The lens planner's parameters the procedures use (``config/lens_planner.yaml``).
 
-    travel_distance: float = 0.112       # d_lp of the travel between points [m]
-    safe_margin: float = 0.015           # sideways moves this far from the heating d_lp [m]
-    same_point: float = 0.001            # a focus shift below this goes along the ray [m]
-    marker_side: float = 0.04            # the ArUco marker's black square [m]
-    view_margin: float = 30.0            # marker and spot this far inside the image [px]
-    observe_frames: int = 4              # spot observations per pose [-]
-    view_points: tuple = ()              # panel points the calibrations aim near, world [m]
-    world_poses: int = 8                 # poses of the robot-world calibration [-]
-    world_distance: float = 0.11         # lens height while the marker is observed [m]
-    rig_poses: int = 48                  # marker views of the rig calibration [-]
-    rig_spot_poses: int = 16             # sweep poses of the lens-centre fit [-]
-    rig_spot_tilts: tuple = (0.0, 5.0, 10.0)     # their lens tilts off the sun [deg]
-    rig_max_residual: tuple = (0.001, math.radians(0.5), 0.0005)   # rms: [m], [rad], spot [m]
-    sweep_count: int = 6                 # poses of the sun sweep [-]
-    sweep_tilts: tuple = (0.0, 5.0, 10.0)          # lens tilts off the sun [deg]
-    sweep_distances: tuple = (0.076, 0.082, 0.088)  # lens-panel distances of the sweep [m]
-    acquire_step: float = 30.0           # azimuth step of the spot search [deg]
-    focus_sweep: tuple = (0.064, 0.098, 0.001)      # d_min, d_max, step of the focal sweep [m]
+    Their defaults, ranges and descriptions are declared once, in
+    ``lens_planner_parameters.declare_settings``.
+    """
+
+    travel_distance: float       # d_lp of the travel between points [m]
+    safe_margin: float           # sideways moves this far or farther from the heating d_lp [m]
+    same_point: float            # a focus shift below this goes straight along the ray [m]
+    marker_side: float           # the ArUco marker's black square [m]
+    view_margin: float           # marker and spot this far inside the image [px]
+    observe_frames: int          # spot observations per pose [-]
+    view_points: tuple           # panel points the calibrations aim near, world (x, y) [m]
+    world_poses: int             # poses of the robot-world calibration [-]
+    world_distance: float        # lens height over the panel while the marker is seen [m]
+    rig_poses: int               # marker views of the rig calibration [-]
+    rig_spot_poses: int          # sweep poses of its lens-centre fit [-]
+    rig_spot_tilts: tuple        # their lens tilts off the sun [deg]
+    rig_max_residual: tuple      # rms bounds: camera chain [m], [rad]; spots [m]
+    sweep_count: int             # poses of the sun sweep [-]
+    sweep_tilts: tuple           # its lens tilts off the sun [deg]
+    sweep_distances: tuple       # its lens-panel distances [m]
+    acquire_step: float          # azimuth step of the spot search [deg]
+    focus_sweep: tuple           # d_min, d_max, step of the focal sweep [m]
 
 
 class LensRigPort(abc.ABC):
