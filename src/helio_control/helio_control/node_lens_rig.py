@@ -152,10 +152,10 @@ class NodeLensRig(LensRigPort):
 
     async def estimate_sun(self, method, since, rig_calibration=None):
         """Return estimate_sun's answer; with `rig_calibration`, once it names that one."""
+        deadline = time.monotonic() + self.node.server_timeout
         response = await self._estimate(method, since)
         if rig_calibration is None:
             return response
-        deadline = time.monotonic() + self.node.server_timeout
         while response.rig_calibration != rig_calibration and time.monotonic() < deadline:
             await sleep(self.node, 0.1, wall=True)
             response = await self._estimate(method, since)

@@ -20,7 +20,8 @@ from helio_optics.geometry import transform_points
 from helio_optics.node_kit.conversions import point_to_array, stamp_to_seconds
 import numpy as np
 
-# a sun this low or lower casts a spot too long and too faint to paint with
+# a sun at or below this elevation is refused as too low to paint (the spot search's
+# elevation is the ephemeris' at the site)
 MIN_SUN_ELEVATION = math.radians(5.0)
 # The lens-panel distances of the spot search, as offsets from the heating distance [m],
 # tried in this order for each azimuth guess (``sun_sweep.acquisition_poses``). The guess
