@@ -326,15 +326,15 @@ def test_the_launch_files_are_installed_and_name_launch_when_it_is_missing():
 # ---------------------------------------------------------------------------- run report
 @pytest.fixture(scope='module')
 def painted_run(tmp_path_factory):
-    """Paint three dots in the simulated world (sim_demo); journal them with the writer."""
+    """Paint three dots in the simulated world (the TRUE sun); journal them with the writer."""
     from helio_control.plan import load_plan_options, plan_dots
-    from helio_control.sim_demo import Demo, DEFAULT_DOTS
+    from true_sun_painting import DEFAULT_DOTS, TrueSunPainting
     import time
     run_dir = tmp_path_factory.mktemp('run')
     targets = DEFAULT_DOTS[:3]
     plan = plan_dots(np.asarray(targets), load_plan_options(), None, None)
     (run_dir / 'plan.json').write_text(plan.to_json())
-    demo = Demo(str(run_dir / 'ports'), log=lambda message: None)
+    demo = TrueSunPainting(str(run_dir / 'ports'), log=lambda message: None)
     peaks = {}
     read = demo.next_thermal_np
 

@@ -1,34 +1,21 @@
 """
-Interim demo: paint a handful of dots in the simulated world through the real driver code.
+A test's painting with the world's TRUE sun, through the real driver clients, in-process.
 
-``python -m helio_control.sim_demo --out DIR`` starts the simulated world with its emulated
-Dobot and Maestro on pseudo-terminals, connects ``DobotClient`` and ``MaestroClient`` (the
-drivers' serial libraries) to those ports and runs Algorithm 1 of the paper
-(``helio_control.dot_cycle``) on a few dots: move the lens so the focus lands on the dot at
-d_lp = 8.2 cm (Eqs 14-15 and the rig's inverse kinematics), hold it while N_p (thermal pixels
-at the 180.9 degC read-out cap, computed by ``helio_perception.thermal`` from the simulated
-16UC1 thermal image) is below 30, retreat by 3 cm and wait until N_p is back to 0, then the
-next dot. At the end it writes
-``canvas.png`` and ``dots.csv`` (the charred dots' ground truth) into DIR and prints the
-placement error of every dot.
+``TrueSunPainting`` hosts the simulated world with its emulated Dobot and Maestro on
+pseudo-terminals, connects ``DobotClient`` and ``MaestroClient`` (the drivers' serial
+libraries) to those ports and runs Algorithm 1 of the paper (``helio_control.dot_cycle``) on
+a few dots: the lens moved so the focus lands on the dot at d_lp = 8.2 cm (Eqs 14-15 and the
+rig's inverse kinematics), held while N_p (``helio_perception.thermal`` on the simulated
+16UC1 image) is below its target, retreated by 3 cm until N_p is back to 0, then the next
+dot. The world steps in lockstep with it, so a dot costs seconds of wall time.
 
-SHORTCUT (clearly not the product): the demo aims with the simulated world's TRUE sun
-direction (``helio_drivers.sim.truth``). In the real graph the sun comes from
-``sun_estimator`` (Eqs 11-12) and the lens pose from ``lens_planner``; those are other
-issues. Everything else is as on hardware: the
-motion goes over the serial protocol, the world reads where the emulated arm truly is, and
-the charring is judged from the thermal image only.
-
-The world steps in lockstep with the demo (simulated time runs as fast as the machine
-allows), so the run is deterministic and takes well under a minute of wall time per dot.
+It aims with the world's TRUE sun (``helio_drivers.sim.truth``): a test double of the
+controller, for the tests that need a painted run quickly (the report's). The product
+paints through the graph (``helio paint``); this was shipped as ``helio_control.sim_demo``
+(the interim demo) until issue 32 retired it.
 """
 
-import argparse
-import math
 import os
-import sys
-import tempfile
-import time
 
 from helio_control.dot_cycle import CycleSettings, Decision, DotCycle
 from helio_drivers.dobot_client import DobotClient
@@ -37,8 +24,6 @@ from helio_drivers.maestro_client import MaestroClient
 from helio_drivers.sim.devices import DeviceSettings, SimDevices
 from helio_drivers.sim.truth import true_sun_focus_joints
 from helio_drivers.sim.world import SimSettings, SimWorld
-from helio_optics.node_kit.deployment import rig_file_or_default
-from helio_optics.rig_kinematics import load_rig_parameters
 from helio_perception.thermal import ThermalAnalyzer, ThermalConfig
 import numpy as np
 
@@ -46,7 +31,7 @@ DEFAULT_DOTS = ((0.060, 0.060), (0.064, 0.060), (0.068, 0.060), (0.060, 0.064),
                 (0.060, 0.068), (0.068, 0.068))
 
 
-class Demo:
+class TrueSunPainting:
     """The world, its devices and the two driver clients, stepped in lockstep."""
 
     def __init__(self, port_dir, settings=None, rig_parameters=None, log=print):
@@ -123,61 +108,3 @@ class Demo:
                      f'back to 0 after {cycle.cooling_time:.1f} s (sim time '
                      f'{self.world.time:.1f} s)')
         return records
-
-
-def match_dots(targets, charred):
-    """Pair every target with the nearest charred dot: list of (target, dot or None, error)."""
-    pairs = []
-    for target in targets:
-        best, error = None, math.inf
-        for dot in charred:
-            distance = math.hypot(dot.x - target[0], dot.y - target[1])
-            if distance < error:
-                best, error = dot, distance
-        pairs.append((target, best, error))
-    return pairs
-
-
-def main(argv=None):
-    """Run the demo (see the module docstring)."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--out', required=True, help='directory for canvas.png and dots.csv')
-    parser.add_argument('--dots', type=int, default=len(DEFAULT_DOTS),
-                        help=f'how many of the {len(DEFAULT_DOTS)} preset dots to paint')
-    parser.add_argument('--rig', default='', help="rig YAML (default: the workspace's "
-                        'config/rig.yaml)')
-    args = parser.parse_args(argv)
-    if not 1 <= args.dots <= len(DEFAULT_DOTS):
-        parser.error(f'--dots must be in 1..{len(DEFAULT_DOTS)}')
-    rig_file = rig_file_or_default(args.rig)
-    rig = load_rig_parameters(rig_file)
-    print(f'[sim_demo] rig geometry from {rig_file}')
-    print('[sim_demo] SHORTCUT: aiming with the simulated TRUE sun (the sun estimator and lens '
-          'planner are not part of this demo)')
-    wall = time.monotonic()
-    with tempfile.TemporaryDirectory(prefix='helio_demo_') as port_dir:
-        demo = Demo(port_dir, rig_parameters=rig, log=lambda m: print(f'[sim_demo] {m}'))
-        try:
-            targets = DEFAULT_DOTS[:args.dots]
-            demo.paint(targets)
-            png, csv = demo.world.write_outputs(args.out)
-            charred = demo.world.charred_dots()
-        finally:
-            demo.close()
-    errors = []
-    for target, dot, error in match_dots(targets, charred):
-        if dot is None:
-            print(f'[sim_demo] target ({target[0]:.4f}, {target[1]:.4f}) m: no charred dot')
-            continue
-        errors.append(error)
-        print(f'[sim_demo] target ({target[0]:.4f}, {target[1]:.4f}) m -> dot ({dot.x:.4f}, '
-              f'{dot.y:.4f}) m, error {error * 1e3:.2f} mm, diameter {dot.diameter * 1e3:.2f} mm')
-    print(f'[sim_demo] {len(charred)} charred dots for {len(targets)} targets; mean placement '
-          f'error {np.mean(errors) * 1e3 if errors else float("nan"):.2f} mm; '
-          f'{time.monotonic() - wall:.0f} s wall')
-    print(f'[sim_demo] wrote {png} and {csv}')
-    return 0 if len(errors) == len(targets) else 1
-
-
-if __name__ == '__main__':
-    sys.exit(main())
