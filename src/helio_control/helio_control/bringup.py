@@ -254,9 +254,10 @@ def wait_for_devices(graph, timeout, devices=('dobot', 'servo')):
     ``reconnect_max`` of 0.5 s), so it connects up to 0.5 s after the world opened its ports.
     """
     from helio_msgs.msg import DeviceStatus
+    from helio_optics.node_kit import topics
     from helio_optics.node_kit.in_process_graph import TRANSIENT_LOCAL_QOS
     for device in devices:
-        graph.collect(DeviceStatus, f'{device}/status', TRANSIENT_LOCAL_QOS) \
+        graph.collect(DeviceStatus, topics.device_status(device), TRANSIENT_LOCAL_QOS) \
             .wait_for_message(lambda status: status.connected, timeout)
 
 

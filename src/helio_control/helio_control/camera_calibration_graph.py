@@ -29,6 +29,7 @@ from helio_control.calibration_store import (CalibrationRefused, DEFAULT_DIRECTO
 from helio_control.camera_calibration_run import (calibrate_camera, plan_views,
                                                   save_camera_calibration)
 from helio_optics.geometry import PinholeCamera
+from helio_optics.node_kit import topics
 from helio_optics.node_kit.conversions import camera_from_info, image_to_numpy
 from helio_optics.node_kit.deployment import rig_file_or_default
 from helio_optics.rig_kinematics import load_rig_parameters, Rig
@@ -49,8 +50,8 @@ class GraphRig:
         self._frame = None
         self._count = 0           # frames received
         self._first_new = 1       # the first frame counted after the last move
-        self.info = graph.collect(CameraInfo, 'rgb/camera_info', qos_profile_sensor_data)
-        graph.helper.create_subscription(Image, 'rgb/image_raw', self._on_image,
+        self.info = graph.collect(CameraInfo, topics.RGB_CAMERA_INFO, qos_profile_sensor_data)
+        graph.helper.create_subscription(Image, topics.RGB_IMAGE, self._on_image,
                                          qos_profile_sensor_data)
         self.arm = graph.action_client(MoveArm, 'move_arm', timeout)
         self.wrist = graph.action_client(MoveWrist, 'move_wrist', timeout)

@@ -22,6 +22,7 @@ import datetime
 import math
 import os
 
+from helio_optics.node_kit import topics
 from helio_optics.thermal_cameras import PAPER
 
 OK, WARN, FAIL = 'OK', 'WARN', 'FAIL'
@@ -186,7 +187,7 @@ class Facts:
 def check_device(device, status, namespace=''):
     """Return the finding of a driver's link: connected, or why not."""
     name = f'{device} connected'
-    topic = _topic(namespace, f'{device}/status')
+    topic = _topic(namespace, topics.device_status(device))
     if status is None:
         return Finding(name, FAIL, f'no {topic} heard (is {device}_driver running in this '
                        'ROS_DOMAIN_ID and namespace?)',

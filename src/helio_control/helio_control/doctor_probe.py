@@ -22,6 +22,7 @@ from helio_control.calibration_store import DEFAULT_DIRECTORY, list_calibrations
 from helio_control.calibration_store import rig_description
 from helio_control.doctor import (
     CalibrationFacts, ClockFacts, DeviceFacts, Facts, SpotFacts, StreamFacts, ThermalFacts)
+from helio_optics.node_kit import topics
 
 PARAMETER_TIMEOUT = 5.0        # [s] wall, for each node's get_parameters
 # Discovery: a new participant in a busy graph hears its first messages 2-3 s after it
@@ -138,7 +139,7 @@ def gather(namespace='', window=3.0, calibration_dir=None, site_file=None, disco
 
         subscriptions = []
         for device in ('dobot', 'servo'):
-            node.create_subscription(DeviceStatus, f'{device}/status', on_status(device),
+            node.create_subscription(DeviceStatus, topics.device_status(device), on_status(device),
                                      TRANSIENT_LOCAL_QOS)
         stop = []
         node.create_subscription(Bool, emergency_stop.TOPIC,
@@ -159,14 +160,14 @@ def gather(namespace='', window=3.0, calibration_dir=None, site_file=None, disco
                 CameraInfo, f'{kind}/camera_info',
                 keep(facts.camera_infos[kind], lambda m: list(m.k)), qos_profile_sensor_data))
         subscriptions.append(node.create_subscription(
-            ThermalStats, 'thermal/stats', keep(facts.thermal, lambda m: (
+            ThermalStats, topics.THERMAL_STATS, keep(facts.thermal, lambda m: (
                 ThermalFacts(m.t_max, m.threshold, m.camera_cap, m.saturated))),
             qos_profile_sensor_data))
         subscriptions.append(node.create_subscription(
-            SpotObservation, 'spot', keep(facts.spots, lambda m: (
+            SpotObservation, topics.SPOT, keep(facts.spots, lambda m: (
                 SpotFacts(m.camera_pose_source, m.reason, m.valid))), qos_profile_sensor_data))
-        joints = facts.joint_states = StreamFacts(node.resolve_topic_name('joint_states'))
-        subscriptions.append(node.create_subscription(JointState, 'joint_states', keep(
+        joints = facts.joint_states = StreamFacts(node.resolve_topic_name(topics.JOINT_STATES))
+        subscriptions.append(node.create_subscription(JointState, topics.JOINT_STATES, keep(
             joints.stamps, lambda m: m.header.stamp.sec + m.header.stamp.nanosec * 1e-9), 50))
         clock_samples = []
         subscriptions.append(node.create_subscription(Clock, '/clock', keep(

@@ -31,6 +31,7 @@ from helio_control.recorder import Recorder, recorder_subscribed
 from helio_msgs.action import MoveArm, MoveWrist
 from helio_msgs.msg import DeviceStatus, ThermalStats
 from helio_optics.geometry import transform_points
+from helio_optics.node_kit import topics
 from helio_optics.node_kit.conversions import point_to_array, pose_to_matrix
 from helio_optics.node_kit.conversions import stamp_to_seconds
 from helio_optics.node_kit.in_process_graph import InProcessGraph, TRANSIENT_LOCAL_QOS
@@ -99,10 +100,10 @@ class FixtureClient:
         self.wrist = graph.action_client(MoveWrist, 'move_wrist', TIMEOUT)
         self.sun = graph.collect(Vector3Stamped, 'sim/truth/sun_direction', TRANSIENT_LOCAL_QOS)
         self.pose = graph.collect(PoseStamped, 'sim/truth/world_pose', TRANSIENT_LOCAL_QOS)
-        self.stats = graph.collect(ThermalStats, 'thermal/stats',
+        self.stats = graph.collect(ThermalStats, topics.THERMAL_STATS,
                                    QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
         for device in ('dobot', 'servo'):
-            graph.collect(DeviceStatus, f'{device}/status', TRANSIENT_LOCAL_QOS) \
+            graph.collect(DeviceStatus, topics.device_status(device), TRANSIENT_LOCAL_QOS) \
                 .wait_for_message(lambda status: status.connected, TIMEOUT)
 
     def focus_joints(self, dot, d_lp):

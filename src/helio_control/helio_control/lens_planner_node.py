@@ -49,6 +49,7 @@ from helio_msgs.action import (CalibrateFocus, CalibrateRig, CalibrateWorld, Foc
 from helio_msgs.msg import FocalCalibration, SpotObservation, SunEstimate
 from helio_msgs.srv import EstimateSun
 from helio_optics.focus_targeting import FocusTargeting
+from helio_optics.node_kit import topics
 from helio_optics.node_kit.awaitables import FirstOf, sleep
 from helio_optics.node_kit.conversions import camera_from_info, matrix_to_pose
 from helio_optics.node_kit.conversions import point_to_array
@@ -142,18 +143,18 @@ class LensPlannerNode(Node):
             'may take before the node stops [s wall].', 0.0, 60.0)
         self.driver_goals = []              # handles of the driver goals in flight
         self.spot_waiters = []
-        self.create_subscription(JointState, 'joint_states', self._on_joint_state, 50)
-        self.create_subscription(SunEstimate, 'sun/estimate', self._on_sun, LATCHED)
-        self.create_subscription(SpotObservation, 'spot', self._on_spot, RELIABLE)
-        self.create_subscription(CameraInfo, 'rgb/camera_info', self._on_camera_info,
+        self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state, 50)
+        self.create_subscription(SunEstimate, topics.SUN_ESTIMATE, self._on_sun, LATCHED)
+        self.create_subscription(SpotObservation, topics.SPOT, self._on_spot, RELIABLE)
+        self.create_subscription(CameraInfo, topics.RGB_CAMERA_INFO, self._on_camera_info,
                                  qos_profile_sensor_data)
         self.world_publisher = self.create_publisher(PoseStamped, 'calibration/world_pose',
                                                      LATCHED)
-        self.focus_publisher = self.create_publisher(FocalCalibration, 'calibration/focus',
+        self.focus_publisher = self.create_publisher(FocalCalibration, topics.FOCUS_CALIBRATION,
                                                      LATCHED)
         self.rig_publisher = self.create_publisher(String, RIG_CALIBRATION_TOPIC, LATCHED)
         self.lease = declare_lease(
-            self, 'lease', 'painter/heartbeat',
+            self, 'lease', topics.PAINTER_HEARTBEAT,
             'the client a focus at the heating distance is held for (the painter)',
             'a lens left at the heating distance is retreated', self._on_heartbeat,
             self._check_lease)

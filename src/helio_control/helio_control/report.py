@@ -50,6 +50,7 @@ import cv2
 from helio_control.bag_files import BagError, decode_messages, read_topics, recover_bag
 from helio_control.dot_check import expected_dot
 from helio_control.run_journal import read_journal
+from helio_optics.node_kit import topics
 from helio_perception.char_dots import measure_in_mask
 import numpy as np
 
@@ -147,25 +148,25 @@ def recording_series(bag):
     series = {'thermal': [], 'sun': [], 'truth': [], 'canvas': None}
     try:
         recover_bag(bag)
-        topics = read_topics(bag)
+        recorded = read_topics(bag)
     except (BagError, OSError) as error:
         raise ReportError(f'recording {bag}: {error}') from None
 
     def find(suffix):
-        return [name for name in topics if name.rstrip('/').endswith(suffix)]
-    wanted = find('thermal/stats') + find('sun/estimate') + find('sim/truth/sun_direction') \
-        + find('sim/canvas')
+        return [name for name in recorded if name.rstrip('/').endswith(suffix)]
+    wanted = (find(topics.THERMAL_STATS) + find(topics.SUN_ESTIMATE)
+              + find('sim/truth/sun_direction') + find(topics.SIM_CANVAS))
     for topic, log_time, message in decode_messages(bag, wanted):
         t = log_time * 1e-9
-        if topic.endswith('thermal/stats'):
+        if topic.endswith(topics.THERMAL_STATS):
             series['thermal'].append((t, message.t_max, message.n_p))
-        elif topic.endswith('sun/estimate'):
+        elif topic.endswith(topics.SUN_ESTIMATE):
             d = message.direction
             series['sun'].append((t, d.x, d.y, d.z, message.elevation, message.azimuth))
         elif topic.endswith('sim/truth/sun_direction'):
             v = message.vector
             series['truth'].append((t, v.x, v.y, v.z))
-        elif topic.endswith('sim/canvas'):
+        elif topic.endswith(topics.SIM_CANVAS):
             series['canvas'] = message
     return series
 

@@ -30,6 +30,7 @@ import foxglove
 from helio_control.bag_files import full_type_name, message_class, message_definition
 from helio_control.view_model import cdr_stamp_ns, INPUTS, output_schema_bytes, OUTPUTS
 from helio_control.view_model import PlanFile, RGB_IMAGE, THERMAL_IMAGE, ViewModel
+from helio_optics.node_kit import topics
 from helio_optics.node_kit.deployment import declare_rig
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.runner import run_node
@@ -40,9 +41,9 @@ from rclpy.serialization import deserialize_message
 # Longest wait for the server to stop [s]: a client that stopped reading holds its close
 # handshake for tens of seconds (50 s measured with a client whose socket was full).
 STOP_TIMEOUT = 2.0
-LATCHED_INPUTS = ('sun/estimate', 'thermal/window', 'sim/truth/sun_direction')
+LATCHED_INPUTS = (topics.SUN_ESTIMATE, topics.THERMAL_WINDOW, 'sim/truth/sun_direction')
 FORWARDED = {RGB_IMAGE: 'sensor_msgs/msg/Image', THERMAL_IMAGE: 'sensor_msgs/msg/Image',
-             'thermal/stats': 'helio_msgs/msg/ThermalStats'}
+             topics.THERMAL_STATS: 'helio_msgs/msg/ThermalStats'}
 NEWEST_ONLY = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          reliability=ReliabilityPolicy.BEST_EFFORT)
 NEWEST_LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,

@@ -24,23 +24,24 @@ from helio_control.view_scene import ray_entity, ray_line, rgb_annotations, SCEN
 from helio_control.view_scene import scene_update, schema_bytes, SUN_TRUTH_COLOUR
 from helio_control.view_scene import thermal_annotations, time_dict
 from helio_optics.geometry import invert_transform
+from helio_optics.node_kit import topics
 from helio_optics.node_kit.conversions import camera_from_info, pose_to_matrix
 from helio_optics.node_kit.conversions import stamp_to_nanoseconds
 from helio_optics.node_kit.joint_states import JointStateBuffer
 from helio_perception.ground_plane import marker_object_points
 import numpy as np
 
-RGB_IMAGE = 'rgb/image_raw'
-THERMAL_IMAGE = 'thermal/image_raw'
+RGB_IMAGE = topics.RGB_IMAGE
+THERMAL_IMAGE = topics.THERMAL_IMAGE
 INPUTS = {                      # topic: (type, ViewModel method)
-    'rgb/camera_info': ('sensor_msgs/msg/CameraInfo', 'on_rgb_info'),
-    'thermal/camera_info': ('sensor_msgs/msg/CameraInfo', 'on_thermal_info'),
-    'spot': ('helio_msgs/msg/SpotObservation', 'on_spot'),
-    'thermal/stats': ('helio_msgs/msg/ThermalStats', 'on_stats'),
-    'joint_states': ('sensor_msgs/msg/JointState', 'on_joints'),
-    'sun/estimate': ('helio_msgs/msg/SunEstimate', 'on_sun'),
+    topics.RGB_CAMERA_INFO: ('sensor_msgs/msg/CameraInfo', 'on_rgb_info'),
+    topics.THERMAL_CAMERA_INFO: ('sensor_msgs/msg/CameraInfo', 'on_thermal_info'),
+    topics.SPOT: ('helio_msgs/msg/SpotObservation', 'on_spot'),
+    topics.THERMAL_STATS: ('helio_msgs/msg/ThermalStats', 'on_stats'),
+    topics.JOINT_STATES: ('sensor_msgs/msg/JointState', 'on_joints'),
+    topics.SUN_ESTIMATE: ('helio_msgs/msg/SunEstimate', 'on_sun'),
     'sim/truth/sun_direction': ('geometry_msgs/msg/Vector3Stamped', 'on_sun_truth'),
-    'thermal/window': ('geometry_msgs/msg/PointStamped', 'on_window'),
+    topics.THERMAL_WINDOW: ('geometry_msgs/msg/PointStamped', 'on_window'),
     'paint/_action/feedback': ('helio_msgs/action/PaintPattern_FeedbackMessage',
                                'on_feedback'),
 }

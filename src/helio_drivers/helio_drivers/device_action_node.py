@@ -69,6 +69,7 @@ from helio_drivers.serial_link import (
     PortBusyError, ReconnectBackoff)
 from helio_msgs.msg import DeviceStatus
 from helio_optics.node_kit import emergency_stop
+from helio_optics.node_kit import topics
 from helio_optics.node_kit.awaitables import sleep
 from helio_optics.node_kit.emergency_stop import EmergencyStopListener
 from helio_optics.node_kit.parameters import declare
@@ -229,9 +230,9 @@ class DeviceActionNode(Node):
         # a group of their own: one call at a time, the rest of the node unaffected.
         self.service_group = MutuallyExclusiveCallbackGroup()
 
-        self.joint_publisher = self.create_publisher(JointState, 'joint_states', 10)
+        self.joint_publisher = self.create_publisher(JointState, topics.JOINT_STATES, 10)
         self.status_publisher = self.create_publisher(
-            DeviceStatus, f'{spec.device}/status',
+            DeviceStatus, topics.device_status(spec.device),
             latched(5))
         # Every /clock tick wakes the device thread: joint states and move polls follow
         # simulated time (no effect on a clock that is not driven by /clock)

@@ -38,6 +38,7 @@ from helio_msgs.srv import EstimateSun
 from helio_optics.centre_noise import CentreNoise, frame_verdicts, merge_holds
 from helio_optics.ephemeris import angle_offsets, corrected_angles, sun_position
 from helio_optics.geometry import direction_from_angles, invert_transform, transform_points
+from helio_optics.node_kit import topics
 from helio_optics.node_kit.conversions import point_to_array, stamp_from_seconds
 from helio_optics.node_kit.conversions import stamp_to_nanoseconds, stamp_to_seconds
 from helio_optics.node_kit.deployment import declare_lens, declare_rig, declare_site
@@ -102,9 +103,9 @@ class SunEstimatorNode(Node):
         self._skipped = collections.Counter()   # spots left out since the start, by why
         self._estimate = None    # (SunEstimate message at the anchor, anchor SunPosition)
         self.estimate_publisher = self.create_publisher(
-            SunEstimate, 'sun/estimate', LATCHED)
-        self.create_subscription(JointState, 'joint_states', self._on_joint_state, 50)
-        self.create_subscription(SpotObservation, 'spot', self._on_spot, 20)
+            SunEstimate, topics.SUN_ESTIMATE, LATCHED)
+        self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state, 50)
+        self.create_subscription(SpotObservation, topics.SPOT, self._on_spot, 20)
         # A deep request queue: with the default 10, requests arriving while one estimate ran
         # were dropped unanswered (issue 35: 39 of 50 simultaneous requests never answered)
         self.create_service(EstimateSun, 'estimate_sun', self._on_estimate_sun,

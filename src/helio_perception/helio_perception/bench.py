@@ -31,6 +31,7 @@ import time
 import cv2
 from helio_optics.bench_report import add_json_option, median_call_ms, report
 from helio_optics.config_files import config_path
+from helio_optics.node_kit import topics
 from helio_perception.ground_plane import GroundMapping, MarkerDetector
 from helio_perception.spot_detection import SpotDetector, to_gray
 from helio_perception.synthetic_scene import SyntheticScene
@@ -164,10 +165,10 @@ def bench_end_to_end(width, height, rate, seconds, figures, profile=True, joint_
             if not msg.valid:
                 invalid.append(msg.reason)
 
-    node.create_subscription(SpotObservation, 'spot', on_spot, 100)
-    images = node.create_publisher(Image, 'rgb/image_raw', qos_profile_sensor_data)
-    infos = node.create_publisher(CameraInfo, 'rgb/camera_info', qos_profile_sensor_data)
-    joints = node.create_publisher(JointState, 'joint_states', 10)
+    node.create_subscription(SpotObservation, topics.SPOT, on_spot, 100)
+    images = node.create_publisher(Image, topics.RGB_IMAGE, qos_profile_sensor_data)
+    infos = node.create_publisher(CameraInfo, topics.RGB_CAMERA_INFO, qos_profile_sensor_data)
+    joints = node.create_publisher(JointState, topics.JOINT_STATES, 10)
     info = CameraInfo()
     info.width, info.height = width, height
     info.k = [float(v) for v in scene.camera.matrix.ravel()]
@@ -212,7 +213,7 @@ def bench_end_to_end(width, height, rate, seconds, figures, profile=True, joint_
     try:
         deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline and (images.get_subscription_count() == 0
-                                               or node.count_publishers('spot') == 0):
+                                               or node.count_publishers(topics.SPOT) == 0):
             executor.spin_once(timeout_sec=0.05)
         if images.get_subscription_count() == 0:
             raise RuntimeError('spot_detector did not start within 30 s')

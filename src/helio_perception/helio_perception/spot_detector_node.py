@@ -25,6 +25,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Point
 from helio_msgs.msg import SpotObservation
 from helio_optics.geometry import invert_transform, quaternion_from_matrix
+from helio_optics.node_kit import topics
 from helio_optics.node_kit.conversions import camera_from_info, image_to_numpy
 from helio_optics.node_kit.conversions import ImageConversionError, stamp_to_seconds
 from helio_optics.node_kit.deployment import declare_lens, declare_rig
@@ -224,7 +225,7 @@ class SpotDetectorNode(Node):
         self.diagnostics_period = declare(self, 'diagnostics_period', 1.0,
                                           'Period of /diagnostics and the log summary, on '
                                           'wall time [s].', 0.0, 3600.0)
-        self.freshness = InputFreshness.declared(self, 'rgb/image_raw', time.monotonic())
+        self.freshness = InputFreshness.declared(self, topics.RGB_IMAGE, time.monotonic())
 
         self.camera_info_file = declare(
             self, 'camera_info_file', '',
@@ -239,14 +240,14 @@ class SpotDetectorNode(Node):
         self._info_key = None
         self._file_camera = None     # (PinholeCamera or None, why not) of camera_info_file
         self.file_refused = ''       # why camera_info_file was refused last ('' if it was not)
-        self.spot_pub = self.create_publisher(SpotObservation, 'spot',
+        self.spot_pub = self.create_publisher(SpotObservation, topics.SPOT,
                                               QoSProfile(depth=10,
                                                          reliability=ReliabilityPolicy.RELIABLE))
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(Image, 'rgb/image_raw', self.on_image, qos_profile_sensor_data)
-        self.create_subscription(CameraInfo, 'rgb/camera_info', self.on_camera_info,
+        self.create_subscription(Image, topics.RGB_IMAGE, self.on_image, qos_profile_sensor_data)
+        self.create_subscription(CameraInfo, topics.RGB_CAMERA_INFO, self.on_camera_info,
                                  qos_profile_sensor_data)
-        self.create_subscription(JointState, 'joint_states', self.on_joint_state,
+        self.create_subscription(JointState, topics.JOINT_STATES, self.on_joint_state,
                                  CAMERA_NODE_JOINT_STATE_DEPTH)
         if self.joint_wait > 0.0:
             # wall time: under a held simulated clock the joints it waits for may never come

@@ -28,6 +28,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Point, PointStamped
 from helio_msgs.msg import ThermalStats
 from helio_optics.geometry import invert_transform
+from helio_optics.node_kit import topics
 from helio_optics.node_kit.conversions import camera_from_info, image_to_numpy
 from helio_optics.node_kit.conversions import ImageConversionError, stamp_to_seconds
 from helio_optics.node_kit.deployment import declare_rig, follow_world_calibration
@@ -108,25 +109,25 @@ class ThermalMonitorNode(Node):
         self.diagnostics_period = declare(self, 'diagnostics_period', 1.0,
                                           'Period of /diagnostics, on wall time [s].',
                                           0.0, 3600.0)
-        self.freshness = InputFreshness.declared(self, 'thermal/image_raw', time.monotonic())
+        self.freshness = InputFreshness.declared(self, topics.THERMAL_IMAGE, time.monotonic())
         self.ignored_pixels = 0
         self.stats = FrameStatistics()
         self.joints = JointStateBuffer()
         self.camera = None
         self.stats_pub = self.create_publisher(
-            ThermalStats, 'thermal/stats',
+            ThermalStats, topics.THERMAL_STATS,
             reliable(10))
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(Image, 'thermal/image_raw', self.on_image,
+        self.create_subscription(Image, topics.THERMAL_IMAGE, self.on_image,
                                  qos_profile_sensor_data)
-        self.create_subscription(CameraInfo, 'thermal/camera_info', self.on_camera_info,
+        self.create_subscription(CameraInfo, topics.THERMAL_CAMERA_INFO, self.on_camera_info,
                                  qos_profile_sensor_data)
-        self.create_subscription(JointState, 'joint_states', self.on_joint_state,
+        self.create_subscription(JointState, topics.JOINT_STATES, self.on_joint_state,
                                  CAMERA_NODE_JOINT_STATE_DEPTH)
         self.window = None           # (x, y, radius) [m] in the world frame, or None
         self._window_mask = (None, None)   # (key, mask) of the last pose and window
         self.create_subscription(
-            PointStamped, 'thermal/window', self.on_window, LATCHED)
+            PointStamped, topics.THERMAL_WINDOW, self.on_window, LATCHED)
         if self.diagnostics_period > 0:
             # wall time: the node clock stops with /clock, and that must be reported too
             self.create_timer(self.diagnostics_period, self.publish_diagnostics,

@@ -84,6 +84,7 @@ from helio_drivers.sim.devices import DeviceSettings, SimDevices
 from helio_drivers.sim.warm_up import warm_up
 from helio_drivers.sim.world import flat_settings, settings_from_flat, SimSettings, SimWorld
 from helio_msgs.msg import LightTruth, SpotObservation, ThermalStats
+from helio_optics.node_kit import topics
 from helio_optics.node_kit.conversions import array_to_point, camera_info_from_camera
 from helio_optics.node_kit.conversions import matrix_to_pose, restamped
 from helio_optics.node_kit.conversions import serialized_image, serialized_pose_stamped
@@ -322,7 +323,7 @@ class SimWorldNode(Node):
         self._rgb_topics = self._camera_topics('rgb', 'rgb8', published['rgb'], uncalibrated)
         self._thermal_topics = self._camera_topics(
             'thermal', self.world.thermal_settings.encoding, published['thermal'])
-        self.canvas_pub = self.create_publisher(Image, 'sim/canvas', QoSProfile(depth=1))
+        self.canvas_pub = self.create_publisher(Image, topics.SIM_CANVAS, QoSProfile(depth=1))
         self.truth_sun_pub = self.create_publisher(Vector3Stamped, 'sim/truth/sun_direction',
                                                    TRUTH_QOS)
         self.truth_world_pub = self.create_publisher(PoseStamped, 'sim/truth/world_pose',
@@ -362,7 +363,7 @@ class SimWorldNode(Node):
             'faster than the pace) [s wall]', 0.0, 60.0)
         self._pacer = Pacer(self.real_time_factor, max_lag)
         lockstep_topic = declare(
-            self, 'lockstep_topic', 'thermal/stats',
+            self, 'lockstep_topic', topics.THERMAL_STATS,
             'helio_msgs/ThermalStats topic answering each thermal image: the world runs at '
             'most lockstep_lead ahead of its newest stamp, so a world faster than real time '
             "never outruns the graph's perception ('' : off)")
@@ -396,21 +397,21 @@ class SimWorldNode(Node):
                 lambda message: self._lockstep_seen(message.header.stamp, 'thermal'),
                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         spot_topic = declare(
-            self, 'lockstep_spot_topic', 'spot',
+            self, 'lockstep_spot_topic', topics.SPOT,
             'helio_msgs/SpotObservation topic answering each RGB image (the spot detector): '
             "the world runs at most lockstep_lead ahead of its newest stamp too ('' : off)")
         if spot_topic:
             self.create_subscription(
                 SpotObservation, spot_topic,
-                lambda message: self._lockstep_seen(message.header.stamp, 'spot'),
+                lambda message: self._lockstep_seen(message.header.stamp, topics.SPOT),
                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         if declare(self, 'lockstep_joint_states', True,
                    "Hold the world at most lockstep_joint_lead ahead of each driver's newest "
                    'joint_states too (each set of joint names is one source)'):
-            self.create_subscription(JointState, 'joint_states', self._on_joint_states,
+            self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_states,
                                      QoSProfile(depth=10))
         for topic in declare(
-                self, 'lockstep_heartbeats', ['painter/heartbeat'],
+                self, 'lockstep_heartbeats', [topics.PAINTER_HEARTBEAT],
                 'std_msgs/Header topics stamped on the node clock (a controller that must '
                 'watch the world: the painter): the world runs at most lockstep_lead ahead of '
                 "each one's newest stamp ('' : none)"):
@@ -571,7 +572,7 @@ class SimWorldNode(Node):
         stamp = self._stamp()
         self.clock_pub.publish(restamped(self._clock_bytes, stamp))
         for source, camera, name in (('thermal', self._thermal_topics, 'thermal_camera'),
-                                     ('spot', self._rgb_topics, 'rgb_camera')):
+                                     (topics.SPOT, self._rgb_topics, 'rgb_camera')):
             frame = self._last_frames.get(camera.frame_id)
             if source in waiting and frame is not None and name not in self._cameras_out:
                 camera.image.publish(frame)
