@@ -22,10 +22,10 @@ FAST_JOINTS = proto.PtpJointParams((300.0,) * 4, (1000.0,) * 4)
 
 
 @contextlib.contextmanager
-def dobot_client(retries, joint_params=FAST_JOINTS):
-    """Yield (emulator, connected DobotClient with 0.1 s timeouts and `retries`)."""
+def dobot_client(retries, joint_params=FAST_JOINTS, timeout=0.1):
+    """Yield (emulator, connected DobotClient with `timeout` [s] replies and `retries`)."""
     emulator = DobotEmulator()
-    client = DobotClient(emulator.port_path, timeout=0.1, retries=retries)
+    client = DobotClient(emulator.port_path, timeout=timeout, retries=retries)
     try:
         client.connect()
         client.set_ptp_joint_params(joint_params)
@@ -278,23 +278,25 @@ def test_a_late_maestro_reply_is_never_taken_for_another_channel(maestro):
     assert client.get_position(0) == 4 * 1800
 
 
-def test_delayed_replies_within_the_timeout_are_waited_for_and_late_ones_retried(dobot):
-    emulator, client = dobot
-    retried = client.retried
-    emulator.inject(reply_delay_s=0.05)          # timeout is 0.1 s
-    assert client.get_pose() is not None
-    assert client.retried == retried
-    # later than the timeout: the request is sent again, and the late reply (same id and
-    # ctrl, arriving during the second attempt) answers it
-    emulator.inject(reply_delay_s=0.15)
-    assert client.executed_index() == 0
-    assert client.retried == retried + 1
-    # later than every attempt: a timeout (another command, so the pending late reply to
-    # the retried request above cannot answer it)
-    emulator.inject(reply_delay_s=0.5)
-    with pytest.raises(DeviceTimeoutError, match='ALARMS'):
-        client.get_alarms()
-    emulator.clear_faults()
+def test_delayed_replies_within_the_timeout_are_waited_for_and_late_ones_retried():
+    # 0.4 s replies, the delays in proportion: with 0.1 s the margins (50 ms) were less than
+    # a loaded 2-core machine's scheduling delays (the late reply missed its second attempt)
+    with dobot_client(retries=2, timeout=0.4) as (emulator, client):
+        retried = client.retried
+        emulator.inject(reply_delay_s=0.2)          # within the timeout
+        assert client.get_pose() is not None
+        assert client.retried == retried
+        # later than the timeout: the request is sent again, and the late reply (same id and
+        # ctrl, arriving during the second attempt) answers it
+        emulator.inject(reply_delay_s=0.6)
+        assert client.executed_index() == 0
+        assert client.retried == retried + 1
+        # later than every attempt: a timeout (another command, so the pending late reply
+        # to the retried request above cannot answer it)
+        emulator.inject(reply_delay_s=2.0)
+        with pytest.raises(DeviceTimeoutError, match='ALARMS'):
+            client.get_alarms()
+        emulator.clear_faults()
 
 
 @pytest.fixture
