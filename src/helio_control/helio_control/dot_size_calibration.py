@@ -221,3 +221,48 @@ def dot_size_for_painting(directory, rig_file):
         return load_dot_calibration(os.path.expanduser(directory), description), ''
     except (CalibrationRefused, OSError) as error:
         return None, f'dot-size calibration not used: {error}'
+
+
+# the test row's defaults: on the margin 1 cm above the default canvas (0.05-0.13 m), dots
+# 5 mm apart so that the widest (~2.7 mm) stay apart. Not between the marker and the canvas:
+# at y 0.04 the simulated world's N_p stops at 13 (measured with its true focus)
+ROW_START = (0.06, 0.14)
+ROW_PITCH = 0.005
+N_P_TARGETS = (15, 25, 35, 50)
+
+
+@dataclass(frozen=True)
+class RowGoal:
+    """One PaintPattern goal of the test row: its dots at one N_p target, its small canvas."""
+
+    n_p_target: int
+    points: tuple            # ((x, y), ...) world [m]
+    offset_x: float          # the canvas that holds them (the painter refuses dots outside)
+    offset_y: float
+    canvas_size: float
+
+
+def calibration_row(n_p_targets=N_P_TARGETS, per_target=2, start=ROW_START, pitch=ROW_PITCH):
+    """
+    Return the TestGoals of a row of test dots: `per_target` dots for each N_p target.
+
+    The row runs along +x from `start` (world x, y [m]) by `pitch` [m]; one goal per
+    target, as a PaintPattern goal holds one N_p target. Each goal's canvas is the square
+    just around its own dots (its side at least the row's pitch and at most 0.1 m).
+    """
+    if per_target < 1 or not n_p_targets:
+        raise ValueError('a test row needs at least one N_p target and one dot per target')
+    if len(set(n_p_targets)) < MIN_TARGETS or len(n_p_targets) * per_target < MIN_SAMPLES:
+        raise ValueError(f'a fit needs {MIN_SAMPLES} dots at {MIN_TARGETS} N_p targets at '
+                         f'least, not {per_target} at {sorted(set(n_p_targets))}')
+    goals, k = [], 0
+    for n_p in n_p_targets:
+        if int(n_p) < 1:
+            raise ValueError(f'an N_p target must be >= 1, got {n_p}')
+        points = tuple((start[0] + pitch * (k + i), start[1]) for i in range(per_target))
+        k += per_target
+        margin = 0.5 * pitch
+        side = min(max(points[-1][0] - points[0][0] + 2.0 * margin, 2.0 * pitch), 0.1)
+        goals.append(RowGoal(int(n_p), points, points[0][0] - margin,
+                             start[1] - 0.5 * side, side))
+    return goals

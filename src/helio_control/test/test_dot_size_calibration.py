@@ -12,8 +12,8 @@ import os
 from helio_control.calibration_store import CalibrationRefused, rig_description
 from helio_control.dot_check import expected_dot
 from helio_control.dot_size_calibration import (
-    dot_size_for_painting, DotCalibrationError, DotSample, fit_dot_size, load_dot_calibration,
-    options_for_dot_size, samples_from_journal, save_dot_calibration)
+    calibration_row, dot_size_for_painting, DotCalibrationError, DotSample, fit_dot_size,
+    load_dot_calibration, options_for_dot_size, samples_from_journal, save_dot_calibration)
 from helio_control.plan import load_plan_options, plan_dots
 from helio_control.run_journal import JournalWriter, read_journal
 import numpy as np
@@ -129,3 +129,20 @@ def test_a_plan_burns_and_times_its_dots_by_the_calibration():
     assert list(plain.n_p_targets) == [30] * 4 and 'dot_size' not in plain.parameters
     assert plain.time_estimate['heating_s'] != pytest.approx(plan.time_estimate['heating_s'])
     assert expected_dot(plain, 0)[0] == pytest.approx(2.5e-3)
+
+
+def test_the_test_row_is_one_goal_per_target_each_dot_inside_its_own_canvas():
+    from helio_control.dot_layout import outside_canvas
+    goals = calibration_row((15, 30, 45), per_target=2, start=(0.06, 0.04), pitch=0.005)
+    assert [goal.n_p_target for goal in goals] == [15, 30, 45]
+    points = np.array([p for goal in goals for p in goal.points])
+    assert np.allclose(points[:, 0], 0.06 + 0.005 * np.arange(6)) and np.all(points[:, 1] == 0.04)
+    for goal in goals:
+        options = replace(load_plan_options(), offset_x=goal.offset_x, offset_y=goal.offset_y,
+                          canvas_size=goal.canvas_size).validate()
+        assert not np.any(outside_canvas(np.array(goal.points), options))
+        # the canvas of one goal holds none of the others' dots
+        others = np.array([p for other in goals if other is not goal for p in other.points])
+        assert np.all(outside_canvas(others, options))
+    with pytest.raises(ValueError, match='3 dots at 2 N_p targets'):
+        calibration_row((30,), per_target=5)
