@@ -845,8 +845,8 @@ def build_parser(action_type=None):
                        help="camera_name in the file (usb_cam's camera_name; default "
                        'rgb_camera)')
     dots = calibrate.add_argument_group('dots: the row of test dots')
-    dots.add_argument('--n-p-targets', type=_positive_int, nargs='+', default=[15, 25, 35, 50],
-                      metavar='N', help='N_p targets of the test dots (default 15 25 35 50)')
+    dots.add_argument('--n-p-targets', type=_positive_int, nargs='+', default=[15, 22, 30, 40],
+                      metavar='N', help='N_p targets of the test dots (default 15 22 30 40)')
     dots.add_argument('--dots-per-target', type=_positive_int, default=2, metavar='K',
                       help='test dots at each target (default 2)')
     dots.add_argument('--row', type=_finite_float, nargs=2, default=[0.06, 0.14],

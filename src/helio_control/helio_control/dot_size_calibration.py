@@ -12,8 +12,9 @@ the thermal camera's pixels above the pyrolysis temperature: an area of the wood
 and the paper's Fig. 8d shows the charred area growing with it. The simulated world agrees:
 its dots burnt to N_p 15, 20 and 30 are 1.40-1.43, 1.61-1.63 and 1.96-1.99 mm wide
 (``test/test_painter.py``), d^2 = 2.0, 2.6 and 3.9 mm^2: on one line within 1 %. The dwell
-is fitted as the cycle model fits the heating time (``cycle_model.CycleModel.heating_time``):
-onset + per-pixel x N_p.
+is not linear in N_p (the world's test dots: 3, 9 and 55 s to N_p 15, 25 and 40: past 30 the
+hot spot grows slowly), so it is the mean dwell of each target, interpolated linearly between
+targets (and along the last segment beyond them).
 
 A fit needs ``MIN_SAMPLES`` dots at ``MIN_TARGETS`` distinct N_p targets, and the mean
 diameter must grow with the N_p target: anything else is refused with the reason, never
@@ -52,8 +53,8 @@ class DotSizeCalibration:
 
     area_intercept: float        # a [m^2]
     area_per_n_p: float          # b [m^2 per pixel]
-    dwell_intercept: float       # c [s]
-    dwell_per_n_p: float         # e [s per pixel]
+    dwell_n_p: tuple             # the N_p targets measured, ascending
+    dwell_s: tuple               # the mean dwell of each [s]
     n_p_min: int                 # the N_p targets it was fitted over
     n_p_max: int
     residual_rms: float          # of the diameters about the law [m]
@@ -74,8 +75,13 @@ class DotSizeCalibration:
         return max(1, int(round(n_p)))
 
     def dwell(self, n_p):
-        """Return the heating time [s] to N_p target `n_p` (array or scalar)."""
-        return self.dwell_intercept + self.dwell_per_n_p * np.asarray(n_p, dtype=float)
+        """Return the heating time [s] to N_p target `n_p` (array or scalar), at least 0."""
+        n_p = np.asarray(n_p, dtype=float)
+        x, y = np.asarray(self.dwell_n_p, dtype=float), np.asarray(self.dwell_s, dtype=float)
+        low = y[0] + (n_p - x[0]) * (y[1] - y[0]) / (x[1] - x[0])
+        high = y[-1] + (n_p - x[-1]) * (y[-1] - y[-2]) / (x[-1] - x[-2])
+        inside = np.interp(n_p, x, y)
+        return np.maximum(np.where(n_p < x[0], low, np.where(n_p > x[-1], high, inside)), 0.0)
 
     def within(self, diameter):
         """Return whether `diameter` [m] lies within the diameters the fit measured."""
@@ -84,18 +90,25 @@ class DotSizeCalibration:
 
     def to_parameters(self):
         """Return the law as plain values (the ``dot_size`` section of dots.yaml)."""
-        return {name: (int(value) if isinstance(value, (int, np.integer)) else float(value))
+        return {name: ([float(v) for v in value] if isinstance(value, (tuple, list)) else
+                       int(value) if isinstance(value, (int, np.integer)) else float(value))
                 for name, value in asdict(self).items()}
 
     @classmethod
     def from_parameters(cls, values):
         """Build from ``to_parameters`` values; ValueError naming a missing or bad one."""
         try:
-            calibration = cls(**{name: values[name] for name in cls.__dataclass_fields__})
+            fields = {name: values[name] for name in cls.__dataclass_fields__}
+            fields['dwell_n_p'] = tuple(float(v) for v in fields['dwell_n_p'])
+            fields['dwell_s'] = tuple(float(v) for v in fields['dwell_s'])
+            calibration = cls(**fields)
         except (KeyError, TypeError) as error:
             raise ValueError(f'not a dot-size calibration: {error!r}') from None
         if not calibration.area_per_n_p > 0.0:
             raise ValueError(f'area_per_n_p must be > 0, got {calibration.area_per_n_p}')
+        if len(calibration.dwell_n_p) < 2 or len(calibration.dwell_n_p) != len(
+                calibration.dwell_s):
+            raise ValueError('dwell_n_p and dwell_s must hold two or more values each')
         return calibration
 
     def summary(self):
@@ -106,16 +119,18 @@ class DotSizeCalibration:
                 f'{self.diameter(self.n_p_max) * 1e3:.2f} mm; {self.samples} dots)',
                 f'diameter residual RMS {self.residual_rms * 1e3:.3f} mm, largest '
                 f'{self.residual_max * 1e3:.3f} mm',
-                f'dwell = {self.dwell_intercept:.2f} s + {self.dwell_per_n_p:.3f} s x N_p '
-                f'(RMS {self.dwell_residual_rms:.2f} s)']
+                'dwell: ' + ', '.join(f'{s:.1f} s at N_p {n:g}' for n, s in
+                                      zip(self.dwell_n_p, self.dwell_s))
+                + f' (RMS {self.dwell_residual_rms:.2f} s about the means)']
 
 
 def fit_dot_size(samples):
     """
-    Fit d^2 = a + b N_p and dwell = c + e N_p to DotSamples; return a DotSizeCalibration.
+    Fit d^2 = a + b N_p and each target's mean dwell to DotSamples; a DotSizeCalibration.
 
     Raises DotCalibrationError for fewer than ``MIN_SAMPLES`` usable samples (a diameter and
-    a dwell > 0) or ``MIN_TARGETS`` N_p targets, and for dots that do not grow with N_p.
+    a dwell > 0) or ``MIN_TARGETS`` N_p targets, and for dots that do not grow with N_p, or
+    that take less time to a higher N_p target.
     """
     usable = [s for s in samples if s.diameter > 0.0 and s.dwell > 0.0
               and math.isfinite(s.diameter) and math.isfinite(s.dwell)]
@@ -135,22 +150,27 @@ def fit_dot_size(samples):
                 f'the dots do not grow with N_p: N_p {low} burnt {small * 1e3:.2f} mm, N_p '
                 f'{high} {large * 1e3:.2f} mm (a cloud, a missed focus, or a camera that '
                 'cannot see them?)')
+    dwells = [float(np.mean(dwell[n_p == target])) for target in targets]
+    for (low, short), (high, long) in zip(zip(targets, dwells), zip(targets[1:], dwells[1:])):
+        if long < short:
+            raise DotCalibrationError(
+                f'a higher N_p target took less time: N_p {low} in {short:.1f} s, N_p {high} in '
+                f'{long:.1f} s (a cloud or a stale thermal stream during a test dot?)')
     design = np.column_stack([np.ones_like(n_p), n_p])
     (a, b), *_ = np.linalg.lstsq(design, diameter ** 2, rcond=None)
-    (c, e), *_ = np.linalg.lstsq(design, dwell, rcond=None)
     if not b > 0.0:
         raise DotCalibrationError(f'the charred area does not grow with N_p (slope '
                                   f'{b * 1e6:.4f} mm^2 per pixel)')
-    if e < 0.0:
-        raise DotCalibrationError(f'the dwell shrinks as N_p grows ({e:.3f} s per pixel)')
     fitted = np.sqrt(np.maximum(a + b * n_p, 0.0))
     residual = diameter - fitted
+    mean_dwell = np.interp(n_p, targets, dwells)
     return DotSizeCalibration(
-        area_intercept=float(a), area_per_n_p=float(b), dwell_intercept=float(c),
-        dwell_per_n_p=float(e), n_p_min=targets[0], n_p_max=targets[-1],
+        area_intercept=float(a), area_per_n_p=float(b),
+        dwell_n_p=tuple(float(t) for t in targets), dwell_s=tuple(dwells),
+        n_p_min=targets[0], n_p_max=targets[-1],
         residual_rms=float(np.sqrt(np.mean(residual ** 2))),
         residual_max=float(np.max(np.abs(residual))),
-        dwell_residual_rms=float(np.sqrt(np.mean((dwell - (c + e * n_p)) ** 2))),
+        dwell_residual_rms=float(np.sqrt(np.mean((dwell - mean_dwell) ** 2))),
         samples=len(usable))
 
 
@@ -228,7 +248,8 @@ def dot_size_for_painting(directory, rig_file):
 # at y 0.04 the simulated world's N_p stops at 13 (measured with its true focus)
 ROW_START = (0.06, 0.14)
 ROW_PITCH = 0.005
-N_P_TARGETS = (15, 25, 35, 50)
+# up to 40: the world's N_p grows slowly past 40 (45 after 90 s, the painter's max_heating)
+N_P_TARGETS = (15, 22, 30, 40)
 
 
 @dataclass(frozen=True)

@@ -14,23 +14,11 @@ whose painter runs on this machine).
 import os
 
 from helio_control.calibration_store import DEFAULT_DIRECTORY, rig_description
+from helio_control.camera_calibration_graph import node_parameters
 from helio_control.dot_size_calibration import (calibration_row, fit_dot_size,
                                                 samples_from_journal, save_dot_calibration)
 from helio_control.run_journal import read_journal
 from helio_optics.node_kit.deployment import rig_file_or_default
-
-
-def painter_parameters(graph, names, timeout=3.0):
-    """Return {name: value} of the running painter's parameters ({} if it is silent)."""
-    from rclpy.parameter import parameter_value_to_python
-    from rclpy.parameter_client import AsyncParameterClient
-    client = AsyncParameterClient(graph.helper, 'painter')
-    if not client.wait_for_services(timeout_sec=timeout):
-        return {}
-    response = graph.result_of(client.get_parameters(list(names)), timeout,
-                               "the painter's parameters")
-    return {name: parameter_value_to_python(value)
-            for name, value in zip(names, response.values)}
 
 
 def paint_goal(goal_type, test, run_dir):
@@ -55,7 +43,7 @@ def calibrate_dots_on_graph(graph, client, goal_type, out_dir, goals=None,
     Returns (DotSizeCalibration, samples, path saved ('' when not), messages of the goals).
     Raises ``dot_size_calibration.DotCalibrationError`` when the dots cannot be fitted.
     """
-    asked = painter_parameters(graph, ('calibration_dir', 'rig_file'))
+    asked = node_parameters(graph, 'painter', ('calibration_dir', 'rig_file'))
     directory = os.path.expanduser(calibration_dir or asked.get('calibration_dir')
                                    or DEFAULT_DIRECTORY)
     rig_file = rig_file_or_default(asked.get('rig_file') or '')

@@ -329,8 +329,6 @@ def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
     model, limits = cycle or load_cycle_config()
     parameters = asdict(options)
     if dot_size is not None:
-        model = replace(model, heating_onset_s=max(dot_size.dwell_intercept, 0.0),
-                        heating_per_pixel_s=dot_size.dwell_per_n_p)
         parameters['dot_size'] = dot_size.to_parameters()
     if rig is None:
         rig, rig_file = default_rig()
@@ -396,7 +394,8 @@ def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
     approach = move_time(joints_retreat[order], joints_heat[order], limits)
     # the window rule goes on without the cooling wait (a hot neighbour still costs it above)
     estimate = estimate_time(model if options.cooling_wait else replace(model, cooling_s=0.0),
-                             n_p[kept][order], approach, approach, travel)
+                             n_p[kept][order], approach, approach, travel,
+                             None if dot_size is None else dot_size.dwell)
     return Plan(dots=points[kept][order], n_p_targets=n_p[kept][order],
                 grid_uv=grid_uv[kept][order], rejected=rejected,
                 travel_m=metric.path_length(order), travel_s=float(np.sum(travel)),

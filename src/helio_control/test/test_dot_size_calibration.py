@@ -22,8 +22,8 @@ import pytest
 # the simulated world's law, about (test/test_painter.py: N_p 15, 20, 30 -> 1.40, 1.61, 1.97 mm)
 AREA_INTERCEPT = 0.12e-6     # [m^2]
 AREA_PER_N_P = 0.1253e-6     # [m^2]
-DWELL_INTERCEPT = 10.6       # [s]
-DWELL_PER_N_P = 0.176        # [s]
+DWELL_INTERCEPT = 10.6       # [s] (the cycle model's heating time; the world's is not linear,
+DWELL_PER_N_P = 0.176        # [s]  and a linear law interpolated is exact: a check)
 
 
 def law_samples(targets=(10, 15, 20, 30, 40, 50), per_target=2, noise=0.02, seed=4):
@@ -43,8 +43,9 @@ def test_the_fit_recovers_a_known_law_and_says_its_residual():
     exact = fit_dot_size(law_samples(noise=0.0))
     assert exact.area_intercept == pytest.approx(AREA_INTERCEPT, abs=1e-12)
     assert exact.area_per_n_p == pytest.approx(AREA_PER_N_P, rel=1e-9)
-    assert exact.dwell_intercept == pytest.approx(DWELL_INTERCEPT, rel=1e-9)
-    assert exact.dwell_per_n_p == pytest.approx(DWELL_PER_N_P, rel=1e-9)
+    # the dwells of a linear law: interpolated and extrapolated along it exactly
+    for n_p in (5, 10, 12.5, 31, 50, 70):
+        assert exact.dwell(n_p) == pytest.approx(DWELL_INTERCEPT + DWELL_PER_N_P * n_p)
     assert exact.residual_rms < 1e-12 and (exact.n_p_min, exact.n_p_max) == (10, 50)
     noisy = fit_dot_size(law_samples(noise=0.02))
     truth = np.sqrt(AREA_INTERCEPT + AREA_PER_N_P * np.arange(10, 51))
@@ -74,6 +75,8 @@ def test_the_inverse_gives_the_n_p_target_and_the_dwell_of_a_diameter():
      '2 without a diameter'),
     ([DotSample(15, 1.6e-3, 13.0), DotSample(20, 1.7e-3, 14.0), DotSample(30, 1.5e-3, 16.0)],
      'do not grow with N_p: N_p 20 burnt 1.70 mm, N_p 30 1.50 mm'),
+    ([DotSample(15, 1.4e-3, 13.0), DotSample(20, 1.6e-3, 9.0), DotSample(30, 2.0e-3, 16.0)],
+     'a higher N_p target took less time: N_p 15 in 13.0 s, N_p 20 in 9.0 s'),
 ])
 def test_samples_a_law_cannot_be_fitted_to_are_refused_with_the_reason(samples, words):
     with pytest.raises(DotCalibrationError, match=words.replace('(', r'\(')):
