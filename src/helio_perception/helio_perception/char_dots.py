@@ -23,18 +23,20 @@ and is lost, which made the mean of the channels read dots 12-25 % small. A chan
 clipped when more than ``saturated_share`` of the reference pixels reach ``saturation`` of
 full scale; of the others the brightest (the most contrast) is taken.
 
-Char is found as pixels darker than ``dark_ratio`` of the bare wood's light around the
-target (the ``reference_percentile`` of the grid within ``reference_reach``); char (sRGB
-38, 30, 26: a linear reflectance near 0.02) is 10-20 times darker than wood in the same
-light. The dark regions that reach within ``max_offset_ratio`` of the expected diameter of
-the target are the dot's; around them, beyond the camera's blur (``edge_band``), a ring
-``ring_width`` wide gives the bare wood's light *at the dot* (its median: the spot's light
-and the grain vary by tens of percent over millimetres). Each pixel's char fraction is
-then its darkening between that light and char's (``char_ratio`` of it), and a pixel is
-char where that fraction is at least one half: the char map's own rule (char >= 0.5),
-which a blur that conserves light leaves on a disc's edge. A dot too small for the blur to
-leave its core dark (its smoothed fraction below ``core_contrast``: under ~1.4 mm from the
-retreated lens, 0.3 x 0.67 mm pixels) has no such edge; its area is the sum of the
+Char is found as pixels darker than ``dark_ratio`` of the bare wood's light around the target (the
+``reference_percentile`` of the grid within ``reference_reach``); char (sRGB 38, 30, 26: a linear
+reflectance near 0.02) is 10-20 times darker than wood in the same light. A dark region is the
+dot's when it is dark in the mean of the channels too (the unclipped channel shows the ray-traced
+spot's shades, which the clipped ones hide), centred within ``max_offset_ratio`` of the expected
+diameter of the target and nearer it than half way to a neighbour (a neighbour's blurred edge
+spills over the cells' border), and reaches half of char's contrast to the wood around it. Around
+them, beyond the camera's blur (``edge_band``), a ring ``ring_width`` wide gives the bare wood's
+light *at the dot* (its median: the spot's light and the grain vary by tens of percent over
+millimetres). Each pixel's char fraction is then its darkening between that light and char's
+(``char_ratio`` of it), and a pixel is char where that fraction is at least one half: the char
+map's own rule (char >= 0.5), which a blur that conserves light leaves on a disc's edge. A dot too
+small for the blur to leave its core dark (its smoothed fraction below ``core_contrast``: under
+~1.4 mm from the retreated lens, 0.3 x 0.67 mm pixels) has no such edge; its area is the sum of the
 fractions over its blurred region instead (the light a blur conserves).
 
 The verdict (``DotMeasure.charred``): a dot at least ``min_diameter_ratio`` of the expected
@@ -238,11 +240,11 @@ def measure_in_light(light, origin, target, expected, neighbours=(), settings=No
     """
     Measure the dot of `target` in a `ground_light` grid (linear light, rows from y_min).
 
-    The dark regions within the target's cell (against `neighbours`) that reach within
-    ``max_offset_ratio`` x `expected` of it; the bare wood's light in a ring around them
-    beyond ``edge_band``; each pixel's char fraction between that and char's light; the dot
-    is the pixels of fraction >= 0.5 when its smoothed core reaches ``core_contrast``, else
-    the sum of the fractions over the dark regions grown by ``edge_band``. Return a
+    The dark regions within the target's cell (against `neighbours`) centred near it (see
+    the module); the bare wood's light in a ring around them beyond ``edge_band``; each
+    pixel's char fraction between that and char's light; the dot is the pixels of fraction
+    >= 0.5 when its smoothed core reaches ``core_contrast``, else the sum of the fractions
+    within ``edge_band`` of its darker half. Return a
     DotMeasure (judged as ``measure_in_mask`` judges). `detect`: a grid the regions must be
     dark in too (the mean of the channels: a clipped channel hides the spot's shades).
     """
