@@ -840,7 +840,7 @@ def build_parser(action_type=None):
                        help="the camera's horizontal field of view, the fit's start when "
                        'camera_info is uncalibrated [deg] (default 70)')
     board.add_argument('--calibration-dir', help="where to write (default: the lens planner's "
-                       'calibration_dir, else ~/.helio/calibration)')
+                       "calibration_dir; dots: the painter's; else ~/.helio/calibration)")
     board.add_argument('--camera-name', default='rgb_camera',
                        help="camera_name in the file (usb_cam's camera_name; default "
                        'rgb_camera)')
