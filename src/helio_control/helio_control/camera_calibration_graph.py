@@ -107,13 +107,18 @@ class GraphRig:
 
 def planner_parameters(graph, names, timeout=3.0):
     """Return {name: value} of the running lens planner's parameters ({} if it is silent)."""
+    return node_parameters(graph, 'lens_planner', names, timeout)
+
+
+def node_parameters(graph, node, names, timeout=3.0):
+    """Return {name: value} of the running `node`'s parameters ({} if it is silent)."""
     from rclpy.parameter import parameter_value_to_python
     from rclpy.parameter_client import AsyncParameterClient
-    client = AsyncParameterClient(graph.helper, 'lens_planner')
+    client = AsyncParameterClient(graph.helper, node)
     if not client.wait_for_services(timeout_sec=timeout):
         return {}
     response = graph.result_of(client.get_parameters(list(names)), timeout,
-                               "the lens planner's parameters")
+                               f"the {node.replace('_', ' ')}'s parameters")
     return {name: parameter_value_to_python(value)
             for name, value in zip(names, response.values)}
 
@@ -171,5 +176,6 @@ def calibrate_on_graph(graph, spec, centre, yaw=0.0, views=25, calibration_dir=N
     return GraphCalibration(run, path, directory, notes)
 
 
-__all__ = ['calibrate_on_graph', 'GraphCalibration', 'GraphRig', 'planner_parameters',
+__all__ = ['calibrate_on_graph', 'GraphCalibration', 'GraphRig', 'node_parameters',
+           'planner_parameters',
            'rig_with_saved_world']

@@ -16,6 +16,7 @@ The ``helio`` command: run the graph, paint, record, replay, report.
     helio calibrations [--dir DIR] [--rig FILE]      (what is saved, and for which rig)
     helio calibrate rig|world [--poses N] [--no-apply]   (run one on the running graph)
     helio calibrate camera [--board-centre X Y] [--board-square M] ...   (the RGB camera)
+    helio calibrate dots [--n-p-targets N ...] [--row X Y] ...   (N_p target -> dot size)
     helio doctor [--namespace NS] [--window S] ...   (the rig's checklist, a fix for each)
     helio stop [--namespace NS]                      (the emergency stop)
     helio sky [--date D] [--heading DEG] [--site FILE] [options]   (when the sun serves)
@@ -804,9 +805,14 @@ def build_parser(action_type=None):
         'from the marker (CalibrateWorld). "camera": the RGB camera\'s intrinsics from at '
         'most 25 views of a printed ChArUco board ("helio print board") laid on the panel, '
         'moved to through the drivers; writes camera_info/rgb.yaml into the calibration '
-        "directory (usb_cam's camera_info_url, spot_detector's camera_info_file). Exit 1 "
+        "directory (usb_cam's camera_info_url, spot_detector's camera_info_file). 'dots': "
+        'a row of test dots on the margin outside the canvas at several N_p targets (one '
+        'PaintPattern goal each), their diameters as the RGB camera measured them and their '
+        "dwells fitted (d^2 linear in N_p) and saved as dots.yaml in the painter's "
+        "calibration_dir: a goal's dot_radius is then the burnt dot's width. Exit 1 "
         'when it fails or is refused.')
-    calibrate.add_argument('what', choices=('rig', 'world', 'camera'), help='which calibration')
+    calibrate.add_argument('what', choices=('rig', 'world', 'camera', 'dots'),
+                           help='which calibration')
     calibrate.add_argument('--poses', type=_non_negative_int, default=0,
                            help="poses to visit (0: the lens planner's parameter)")
     calibrate.add_argument('--no-apply', action='store_true',
@@ -834,10 +840,23 @@ def build_parser(action_type=None):
                        help="the camera's horizontal field of view, the fit's start when "
                        'camera_info is uncalibrated [deg] (default 70)')
     board.add_argument('--calibration-dir', help="where to write (default: the lens planner's "
-                       'calibration_dir, else ~/.helio/calibration)')
+                       "calibration_dir; dots: the painter's; else ~/.helio/calibration)")
     board.add_argument('--camera-name', default='rgb_camera',
                        help="camera_name in the file (usb_cam's camera_name; default "
                        'rgb_camera)')
+    dots = calibrate.add_argument_group('dots: the row of test dots')
+    dots.add_argument('--n-p-targets', type=_positive_int, nargs='+', default=[15, 22, 30, 40],
+                      metavar='N', help='N_p targets of the test dots (default 15 22 30 40)')
+    dots.add_argument('--dots-per-target', type=_positive_int, default=2, metavar='K',
+                      help='test dots at each target (default 2)')
+    dots.add_argument('--row', type=_finite_float, nargs=2, default=[0.06, 0.14],
+                      metavar=('X', 'Y'), help='the first test dot, world frame [m] (default '
+                      '0.06 0.14: 1 cm above the default canvas); the row runs '
+                      'along +x: choose bare wood outside the canvas')
+    dots.add_argument('--pitch', type=_finite_float, default=0.005, metavar='M',
+                      help='test dots this far apart [m] (default 0.005)')
+    dots.add_argument('--out', help='run directories of the test goals (default '
+                      'runs/calibrate_dots_<UTC time>)')
     calibrate.set_defaults(handler=command_calibrate)
 
     doctor = commands.add_parser(
@@ -1047,6 +1066,8 @@ def command_calibrate(arguments):
     """Run calibrate_rig or calibrate_world on the running graph; print the result."""
     if arguments.what == 'camera':
         return command_calibrate_camera(arguments)
+    if arguments.what == 'dots':
+        return command_calibrate_dots(arguments)
     from helio_msgs.action import CalibrateRig, CalibrateWorld
     from helio_optics.node_kit.in_process_graph import GraphTimeout, InProcessGraph
     from rclpy.action import ActionClient
@@ -1119,6 +1140,50 @@ def command_calibrate_camera(arguments):
         print(f'  pose {index + 1}: no view ({reason})')
     if done.path:
         print(f'saved to {done.path}')
+    return EXIT_OK
+
+
+def command_calibrate_dots(arguments):
+    """Burn the test row on the running graph, fit the dot size, save dots.yaml."""
+    from helio_control.dot_size_calibration import calibration_row, DotCalibrationError
+    from helio_control.dot_size_calibration_graph import calibrate_dots_on_graph
+    from helio_msgs.action import PaintPattern
+    from helio_optics.node_kit.in_process_graph import GraphTimeout, InProcessGraph
+    from rclpy.action import ActionClient
+    try:
+        goals = calibration_row(arguments.n_p_targets, arguments.dots_per_target,
+                                tuple(arguments.row), arguments.pitch)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    out = arguments.out or os.path.join('runs', 'calibrate_dots_' + datetime.datetime.now(
+        datetime.timezone.utc).strftime('%Y%m%dT%H%M%SZ'))
+    with InProcessGraph('helio_calibrate', namespace=arguments.namespace) as graph:
+        client = ActionClient(graph.helper, PaintPattern, 'paint')
+        if not client.wait_for_server(timeout_sec=arguments.connect_timeout):
+            raise CommandError(f'no painter answers on {graph.helper.resolve_topic_name("paint")}'
+                               f' within {arguments.connect_timeout:g} s: start the graph '
+                               '("helio rig" or "helio sim")')
+        try:
+            calibration, samples, path, messages = calibrate_dots_on_graph(
+                graph, client, PaintPattern.Goal, out, goals, arguments.calibration_dir,
+                save=not arguments.no_apply, timeout=arguments.timeout,
+                progress=lambda text: print(f'[helio] {text}', file=sys.stderr, flush=True))
+        except GraphTimeout:
+            raise CommandError(f'a test goal gave no result within {arguments.timeout:g} s') \
+                from None
+        except DotCalibrationError as error:
+            raise CommandError(f'dot-size calibration failed: {error} (runs in {out})') \
+                from None
+    for message in messages:
+        print(message)
+    for sample in samples:
+        law = float(calibration.diameter(sample.n_p_target))
+        print(f'  N_p {sample.n_p_target}: {sample.diameter * 1e3:.2f} mm in '
+              f'{sample.dwell:.1f} s (the law: {law * 1e3:.2f} mm)')
+    for line in calibration.summary():
+        print(line)
+    if path:
+        print(f'saved to {path}')
     return EXIT_OK
 
 

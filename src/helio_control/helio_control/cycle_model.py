@@ -120,7 +120,7 @@ def load_cycle_config(path=None):
     return model, limits
 
 
-def estimate_time(model, n_p_targets, approach_s, retreat_s, travel_s):
+def estimate_time(model, n_p_targets, approach_s, retreat_s, travel_s, heating_time=None):
     """
     Time estimate of a painting [s] as a dict of parts that add up to ``total_s``.
 
@@ -129,7 +129,9 @@ def estimate_time(model, n_p_targets, approach_s, retreat_s, travel_s):
     value per move between successive dots (N - 1 values). Parts: ``start_s``,
     ``heating_s``, ``retreat_cooling_s`` (per dot the longer of the cooling wait and the
     retreat move with its overhead), ``approach_s``, ``travel_s``, ``overhead_s`` (command
-    overheads of the approach and travel moves, thermal frame waits).
+    overheads of the approach and travel moves, thermal frame waits). `heating_time`
+    (N_p targets -> seconds) replaces the model's heating time (a dot-size calibration's
+    measured dwells).
     """
     n_p_targets = np.asarray(n_p_targets, dtype=float)
     approach_s = np.asarray(approach_s, dtype=float)
@@ -137,7 +139,7 @@ def estimate_time(model, n_p_targets, approach_s, retreat_s, travel_s):
     travel_s = np.asarray(travel_s, dtype=float)
     count = len(n_p_targets)
     parts = {'start_s': model.start_s if count else 0.0,
-             'heating_s': float(np.sum(model.heating_time(n_p_targets))),
+             'heating_s': float(np.sum((heating_time or model.heating_time)(n_p_targets))),
              'retreat_cooling_s': float(np.sum(np.maximum(
                  model.cooling_s, retreat_s + model.move_overhead_s))),
              'approach_s': float(np.sum(approach_s)),

@@ -7,11 +7,13 @@ The expected burnt diameter is the plan's dot pitch (``dot_radius``, paper r_p: 
 dot ~0.2 cm wide" at N_p 30), scaled by the square root of the dot's N_p target over the
 paper's 30 (a dot's area grows with N_p, paper Fig. 8d). The simulated world burns 1.40 mm
 at N_p 15 and 1.61 mm at N_p 20 (``test/test_painter.py``): 1.41 and 1.63 mm by this rule.
-Until the dot-size calibration (item 3) measures it, this is the plan's own figure.
+With a dot-size calibration (item 3: the plan's ``parameters['dot_size']``), the expected
+diameter is the calibration's for the dot's N_p target instead: what the camera measured.
 """
 
 import math
 
+from helio_control.dot_size_calibration import DotSizeCalibration
 import numpy as np
 
 # targets within this many expected diameters of a dot are its neighbours
@@ -22,8 +24,12 @@ PAPER_N_P = 30.0     # the paper's N_p target of a dot r_p wide
 def expected_dot(plan, index):
     """Return (expected diameter [m], neighbouring targets (K, 2) [m]) of the plan's dot."""
     parameters = plan.parameters
-    pitch = float(parameters.get('dot_radius') or 0.002)
-    expected = pitch * math.sqrt(max(float(plan.n_p_targets[index]), 1.0) / PAPER_N_P)
+    n_p = max(float(plan.n_p_targets[index]), 1.0)
+    if parameters.get('dot_size'):
+        expected = float(DotSizeCalibration.from_parameters(parameters['dot_size']).diameter(n_p))
+    else:
+        pitch = float(parameters.get('dot_radius') or 0.002)
+        expected = pitch * math.sqrt(n_p / PAPER_N_P)
     dots = np.asarray(plan.dots, dtype=float).reshape(-1, 2)
     distance = np.hypot(*(dots - dots[index]).T)
     near = (distance <= NEIGHBOUR_REACH * expected) & (np.arange(len(dots)) != index)

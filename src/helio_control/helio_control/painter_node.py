@@ -76,6 +76,7 @@ from geometry_msgs.msg import PointStamped
 from helio_control import sky
 from helio_control.dot_check import expected_dot
 from helio_control.dot_cycle import CycleSettings, Decision, DotCycle
+from helio_control.dot_size_calibration import dot_size_for_painting, options_for_dot_size
 from helio_control.driver_silence import DriverSilence
 from helio_control.picture_input import picture_from_image_msg, PictureError
 from helio_control.plan import options_from_goal, Plan, plan_dots, plan_picture
@@ -189,7 +190,7 @@ class PainterNode(Node):
     def __init__(self, **kwargs):
         """Declare parameters and open the interfaces."""
         super().__init__('painter', **kwargs)
-        self.rig, _ = declare_rig(self)
+        self.rig, self.rig_file = declare_rig(self)
         follow_world_calibration(self, self.rig)
         self.site, _ = declare_site(self)
         self.sky_min_elevation = declare(
@@ -329,6 +330,10 @@ class PainterNode(Node):
             response=declare(self, 'verify.camera_response', 'srgb',
                              "The RGB camera's tone curve, undone before char is measured.",
                              choices=RESPONSES))
+        self.calibration_dir = declare(
+            self, 'calibration_dir', '', 'Where calibrations are read (empty: ~/.helio/'
+            'calibration); its dots.yaml (helio calibrate dots) is read at each goal.') or \
+            '~/.helio/calibration'
         self.add_post_set_parameters_callback(self._on_parameters_set)
         self.rgb_camera = None
         self._rgb_info_key = None
@@ -839,7 +844,10 @@ class PainterNode(Node):
 
     def _make_plan(self, goal):
         try:
-            options = options_from_goal(goal)
+            dot_size, note = dot_size_for_painting(self.calibration_dir, self.rig_file)
+            if note:
+                self.get_logger().warning(note)
+            options = options_for_dot_size(options_from_goal(goal), dot_size, goal.n_p_target > 0)
             options.d_lp, options.retreat = self.heating_distance, self.retreat_offset
             if (goal.cooling or self.cooling) == 'window':
                 options.min_separation = self.window_separation     # no hot neighbour next
@@ -847,10 +855,10 @@ class PainterNode(Node):
             sun = point_to_array(self.sun.direction)
             if goal.points:
                 points = np.array([[p.x, p.y] for p in goal.points], dtype=float)
-                return plan_dots(points, options, self.rig, sun)
+                return plan_dots(points, options, self.rig, sun, dot_size=dot_size)
             picture = goal.image_path if goal.image_path else \
                 picture_from_image_msg(goal.image)
-            return plan_picture(picture, options, self.rig, sun)
+            return plan_picture(picture, options, self.rig, sun, dot_size=dot_size)
         except (PictureError, PlanError, PlanOptionsError, ValueError) as error:
             raise PaintFailed(f'cannot plan the painting: {error}') from None
 

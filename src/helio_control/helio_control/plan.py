@@ -249,14 +249,17 @@ def default_rig():
     return Rig(load_rig_parameters(path)) if path else Rig(), path
 
 
-def plan_picture(picture, options=None, rig=None, sun_ray_robot=None, cycle=None):
+def plan_picture(picture, options=None, rig=None, sun_ray_robot=None, cycle=None,
+                 dot_size=None):
     """
     Plan the painting of a picture (paper Sec. IV-C, Eq 17; Fig. 9); return a Plan.
 
     `options` default to config/picture.yaml; `rig` to the deployment rig; `sun_ray_robot`
     (robot-frame unit ray s0, pointing down) to the nominal sun of the options; `cycle`
-    ((CycleModel, MotionLimits)) to config/cycle_model.yaml. Raises PictureError,
-    PlanOptionsError or PlanError with a message naming the problem.
+    ((CycleModel, MotionLimits)) to config/cycle_model.yaml; `dot_size` (a
+    ``dot_size_calibration.DotSizeCalibration``, or None) to the heating time of the cycle
+    model (see ``plan_dots``). Raises PictureError, PlanOptionsError or PlanError with a
+    message naming the problem.
     """
     options = (options or load_plan_options()).validate()
     source = load_picture(picture)
@@ -279,7 +282,7 @@ def plan_picture(picture, options=None, rig=None, sun_ray_robot=None, cycle=None
         n_p = np.rint(options.n_p_min + (options.n_p_target - options.n_p_min)
                       * darkness).astype(int)
     plan = plan_dots(grid.world(grid_uv), options, rig, sun_ray_robot, grid_uv=grid_uv,
-                     n_p_targets=n_p, cycle=cycle)
+                     n_p_targets=n_p, cycle=cycle, dot_size=dot_size)
     plan.mode = features.mode
     plan.warnings[:0] = list(source.warnings)
     plan.notes[:0] = list(features.notes)
@@ -304,12 +307,16 @@ def plan_quality(plan, features, options):
 
 
 def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
-              n_p_targets=None, cycle=None):
+              n_p_targets=None, cycle=None, dot_size=None):
     """
     Plan explicit world points (N x 2 [m]): canvas, spacing and reach checks, order, time.
 
     Dots outside the canvas, closer than the pitch r_p to an earlier dot, or unreachable
-    for the sun are rejected with a reason (``Plan.rejected``), never dropped silently.
+    for the sun are rejected with a reason (``Plan.rejected``), never dropped silently. With
+    `dot_size` (a ``DotSizeCalibration``; the N_p targets already its, see
+    ``dot_size_calibration.options_for_dot_size``) the time estimate heats each dot for the
+    calibration's measured dwell, and the plan's ``parameters['dot_size']`` keeps the law
+    (the camera then expects each dot at the law's diameter, ``dot_check``).
     """
     options = (options or load_plan_options()).validate()
     points = np.asarray(points, dtype=float).reshape(-1, 2)
@@ -321,6 +328,8 @@ def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
         np.asarray(n_p_targets, dtype=int)
     model, limits = cycle or load_cycle_config()
     parameters = asdict(options)
+    if dot_size is not None:
+        parameters['dot_size'] = dot_size.to_parameters()
     if rig is None:
         rig, rig_file = default_rig()
         parameters['rig_file'] = rig_file or 'built-in defaults'
@@ -385,7 +394,8 @@ def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
     approach = move_time(joints_retreat[order], joints_heat[order], limits)
     # the window rule goes on without the cooling wait (a hot neighbour still costs it above)
     estimate = estimate_time(model if options.cooling_wait else replace(model, cooling_s=0.0),
-                             n_p[kept][order], approach, approach, travel)
+                             n_p[kept][order], approach, approach, travel,
+                             None if dot_size is None else dot_size.dwell)
     return Plan(dots=points[kept][order], n_p_targets=n_p[kept][order],
                 grid_uv=grid_uv[kept][order], rejected=rejected,
                 travel_m=metric.path_length(order), travel_s=float(np.sum(travel)),

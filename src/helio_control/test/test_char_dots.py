@@ -1,7 +1,9 @@
 """
-Charred dots measured per target in frames the simulated world renders (issue 29, item 4).
+Charred dots measured per target in frames the simulated world renders (issue 29, items 3-4).
 
-Last, the expected size a dot is judged against (``dot_check``).
+Then dots of 1.0-3.0 mm, drawn and burnt by the world, measured without the bias the
+clipped channels gave (the camera read dots 12-25 % small). Last, the expected size a dot
+is judged against (``dot_check``).
 
 The world's char is set as discs of known size at known places (the camera renders char
 wherever the char map has it), at 2 mm pitch (touching) and 3 mm pitch, a target left bare,
@@ -70,10 +72,90 @@ def test_each_target_measured_in_a_frame_as_the_char_map_has_it(world, row):
         if truth.charred:
             # per target: the touching neighbours' char is theirs
             assert abs(truth.diameter - drawn) < 0.15e-3
-            assert abs(seen.diameter - truth.diameter) < 0.25 * truth.diameter
+            assert abs(seen.diameter - truth.diameter) < 0.10 * truth.diameter
             assert np.hypot(*(np.subtract(seen.centre, truth.centre))) < 0.3e-3
         elif not drawn:
             assert seen.diameter < 0.2 * EXPECTED and 'no char' in seen.reason
+
+
+def look_from_the_retreated_lens(world, target, expected, neighbours=()):
+    """Return the camera's measure of the dot at `target`, the lens retreated 3 cm over it."""
+    world.set_joints(true_sun_focus_joints(world, target, 0.112))
+    world.step()
+    T_world_rgb, _ = world.camera_poses()
+    return measure_in_image(world.rgb_image(), world.published_cameras['rgb'], T_world_rgb,
+                            target, expected, neighbours)
+
+
+SIZES = np.round(np.arange(1.0, 3.01, 0.25), 2) * 1e-3      # drawn diameters [m]
+
+
+def test_dots_of_1_to_3_mm_measure_as_the_char_map_has_them():
+    # each size at three places, off the camera's pixel grid at random (seeded); each dot
+    # judged against its own size, as the painter judges a calibrated dot
+    world = SimWorld(replace(SimSettings(), flux_rays=8000, seed=3),
+                     load_rig_parameters(default_rig_file()))
+    panel = world.panel
+    grid_x, grid_y = np.meshgrid(*panel.raster_pixel_centres())
+    rng = np.random.default_rng(11)
+    dots = []
+    for k, diameter in enumerate(np.repeat(SIZES, 3)):
+        target = (0.05 + 0.008 * (k % 9) + rng.uniform(0.0, 0.5e-3),
+                  0.06 + 0.008 * (k // 9) + rng.uniform(0.0, 0.7e-3))
+        panel.char[np.hypot(grid_x - target[0], grid_y - target[1]) <= diameter / 2] = 1.0
+        dots.append((target, diameter))
+    world.rgb.update_char(panel.char, (0, panel.char.shape[0], 0, panel.char.shape[1]))
+    ratios = {}
+    for target, diameter in dots:
+        seen = look_from_the_retreated_lens(world, target, diameter)
+        truth = measure_in_mask(panel.charred_mask(), panel.raster_origin,
+                                panel.grid.fine_cell, target, diameter)
+        print(f'drawn {diameter * 1e3:.2f} mm: char map {truth.diameter * 1e3:.2f} mm, '
+              f'camera {seen.diameter * 1e3:.2f} mm ({seen.reason or "charred"})')
+        assert truth.charred
+        ratios.setdefault(diameter, []).append(
+            (seen.diameter / truth.diameter, seen.charred == truth.charred))
+    for diameter, measured in ratios.items():
+        ratio = np.array([r for r, _ in measured])
+        agree = [a for _, a in measured]
+        if diameter >= 1.5e-3:
+            # unbiased: the mean of the three within 5 %; one dot within 15 % (the world
+            # samples the panel at the pixels' centres, 0.28 x 0.67 mm there: no camera
+            # integrates less)
+            assert abs(np.mean(ratio) - 1.0) < 0.05, (diameter, ratio)
+            assert np.all(np.abs(ratio - 1.0) < 0.15), (diameter, ratio)
+            assert all(agree), (diameter, ratio)
+        else:
+            # the blur (0.3 x 0.47 mm) leaves no dark core: found at two places of three
+            # at least, within 25 % (measured: +8 to +20 %; the third not found)
+            assert sum(agree) >= 2 and np.sum(np.abs(ratio - 1.0) < 0.25) >= 2, \
+                (diameter, ratio)
+
+
+def test_dots_the_world_burns_measure_as_its_char_map_has_them():
+    # dots burnt at the true sun's focus (no ROS) for 1.5-120 s: 0.8-2.7 mm in the char map
+    world = SimWorld(replace(SimSettings(), flux_rays=8000),
+                     load_rig_parameters(default_rig_file()))
+    panel = world.panel
+    measured = []
+    for k, dwell in enumerate((1.5, 3.0, 5.0, 8.0, 15.0, 30.0, 60.0, 120.0)):
+        target = (0.055 + 0.008 * k, 0.075)
+        world.set_joints(true_sun_focus_joints(world, target, 0.082))
+        world.run(dwell)
+        seen = look_from_the_retreated_lens(world, target, EXPECTED)
+        world.run(2.0)
+        seen = look_from_the_retreated_lens(world, target, EXPECTED)
+        truth = measure_in_mask(panel.charred_mask(), panel.raster_origin,
+                                panel.grid.fine_cell, target, EXPECTED)
+        print(f'{dwell:5.1f} s: char map {truth.diameter * 1e3:.2f} mm, camera '
+              f'{seen.diameter * 1e3:.2f} mm ({seen.reason or "charred"})')
+        # the verdict against the plan's 2 mm (charred from 1.0 mm) agrees with the char map
+        assert seen.charred == truth.charred, (dwell, seen, truth)
+        if truth.diameter >= 1.45e-3:
+            measured.append(seen.diameter / truth.diameter)
+    assert len(measured) >= 5
+    assert abs(np.mean(measured) - 1.0) < 0.05, measured
+    assert np.all(np.abs(np.array(measured) - 1.0) < 0.12), measured
 
 
 def test_touching_dots_are_measured_per_target_not_per_region(world):
