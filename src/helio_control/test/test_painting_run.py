@@ -1,0 +1,103 @@
+"""
+A painting run (one ``paint`` goal) against a modelled rig: every dot once, cancel, resume.
+
+The rig is ``painter_rig_model.RigModel`` (wood heating as a first-order system under the
+focus, a thermal camera, the sun, the clock); the run plans real dots with the rig model and
+writes its plan and journal in a temporary runs directory. The truths are the model's (which
+dots the focus rested on, and when) and the journal as read back.
+"""
+
+from geometry_msgs.msg import Point
+from helio_control.painting_run import PaintingRun
+from helio_control.run_journal import read_journal
+from helio_msgs.action import PaintPattern
+from painter_rig_model import MOVE, RigModel, run, settings
+import pytest
+
+ROW = [(0.05 + 0.008 * i, 0.07) for i in range(4)]    # world [m], 8 mm apart
+
+
+def goal_of(points, run_dir, **fields):
+    """Return a PaintPattern goal of world `points` written in `run_dir`."""
+    return PaintPattern.Goal(points=[Point(x=x, y=y, z=0.0) for x, y in points],
+                             run_dir=str(run_dir), **fields)
+
+
+def paint(tmp_path, goal, **model_fields):
+    """Run `goal` on a fresh RigModel (its fields set); return (result, ending, model)."""
+    model = RigModel(settings(tmp_path))
+    for name, value in model_fields.items():
+        setattr(model, name, value)
+    result, ending = run(PaintingRun(model, model.settings).execute(goal))
+    return result, ending, model
+
+
+def burnt_in(run_dir):
+    """Return the indices the run's journal says were burnt."""
+    return [dot.index for dot in read_journal(str(run_dir / 'journal.jsonl')).dots
+            if dot.outcome == 'burnt']
+
+
+def test_a_run_burns_every_planned_dot_once_and_journals_each(tmp_path):
+    result, ending, model = paint(tmp_path, goal_of(ROW, tmp_path / 'runs' / 'row'))
+    assert ending == 'succeed' and result.success, result.message
+    assert result.message.startswith('4 dots burnt in ')
+    assert (result.dots_planned, result.dots_burnt, result.dots_resumed) == (4, 4, 0)
+    assert [len(model.heated(target)) for target in ROW] == [1, 1, 1, 1]
+    assert [model.true_n_p(target) for target in ROW] == [0, 0, 0, 0]   # the paper's rule
+    journal = read_journal(str(tmp_path / 'runs' / 'row' / 'journal.jsonl'))
+    assert [dot.index for dot in journal.dots] == [0, 1, 2, 3]
+    assert journal.result.success and journal.result.dots_burnt == 4
+    assert journal.result.duration == pytest.approx(result.duration)
+    assert model.windows[-1] is None                       # no N_p window left behind
+
+
+def test_a_cancel_while_heating_retreats_the_lens_and_ends_the_goal_canceled(tmp_path):
+    run_dir = tmp_path / 'runs' / 'canceled'
+    result, ending, model = paint(tmp_path, goal_of(ROW, run_dir), cancel_at=3.0)
+    assert ending == 'canceled' and not result.success
+    assert result.message == 'canceled: retreated (cancel)'
+    [(since, until)] = model.heated(ROW[0])
+    assert until == pytest.approx(3.0)                     # woken at the cancel
+    at, where, d_lp, urgent = model.moves[-1]
+    assert urgent and where == pytest.approx(ROW[0]) and d_lp == pytest.approx(
+        model.settings.heating_distance + model.settings.retreat_offset)
+    assert model.t == pytest.approx(3.0 + MOVE)
+    journal = read_journal(str(run_dir / 'journal.jsonl'))
+    assert journal.dots == [] and journal.result.message == result.message
+
+
+def test_the_same_goal_again_resumes_at_the_first_unburnt_dot_and_burns_none_twice(tmp_path):
+    runs = tmp_path / 'runs'
+    # the first run is canceled 1 s into the heating of its third dot
+    first, ending, _ = paint(tmp_path, goal_of(ROW, runs / 'first'), cancel_in_heating=(3, 1.0))
+    assert ending == 'canceled' and burnt_in(runs / 'first') == [0, 1]
+    again, ending, model = paint(tmp_path, goal_of(ROW, runs / 'second'))
+    assert ending == 'succeed', again.message
+    assert (again.dots_resumed, again.dots_burnt, again.dots_skipped) == (2, 2, 0)
+    assert again.message.startswith('2 dots burnt') and '2 burnt before' in again.message
+    # the focus never rested on a dot burnt before; the one cut short is burnt now
+    assert [len(model.heated(target)) for target in ROW] == [0, 0, 1, 1]
+    assert sorted(burnt_in(runs / 'first') + burnt_in(runs / 'second')) == [0, 1, 2, 3]
+    assert (runs / 'second' / 'plan.json').read_text() == \
+        (runs / 'first' / 'plan.json').read_text()
+    # the newest run of the goal finished: sent once more, it starts over
+    third, ending, _ = paint(tmp_path, goal_of(ROW, runs / 'third'))
+    assert (third.dots_resumed, third.dots_burnt) == (0, 4)
+
+
+def test_start_index_skips_the_dots_before_it(tmp_path):
+    result, ending, model = paint(tmp_path, goal_of(ROW, tmp_path / 'runs' / 'late',
+                                                    start_index=3))
+    assert ending == 'succeed' and (result.dots_burnt, result.dots_skipped) == (1, 3)
+    assert [len(model.heated(target)) for target in ROW] == [0, 0, 0, 1]
+
+
+@pytest.mark.parametrize('fields, words', [
+    ({'image_path': 'sample:text'}, 'give exactly one source of dots'),
+    ({'cooling': 'fast'}, 'cooling must be one of'),
+])
+def test_a_bad_goal_is_refused_before_anything_moves(tmp_path, fields, words):
+    result, ending, model = paint(tmp_path, goal_of(ROW, tmp_path / 'runs' / 'bad', **fields))
+    assert ending == 'abort' and words in result.message
+    assert model.moves == [] and model.heatings == []
