@@ -71,6 +71,21 @@ def _cancel_if_accepted(sent):
         handle.cancel_goal_async()
 
 
+def _message(message_type, fields):
+    """Return a `message_type` of a dataclass' `fields`, each of its field's Python type."""
+    blank = message_type()
+    return message_type(**{name: type(getattr(blank, name))(value)
+                           for name, value in asdict(fields).items()})
+
+
+def _focus_goal(target, d_lp, travel_d_lp=0.0):
+    """Return the FocusLens goal of world `target` (x, y) at `d_lp` [m]."""
+    goal = FocusLens.Goal(d_lp=float(d_lp), travel_d_lp=float(travel_d_lp))
+    goal.target.header.frame_id = 'world'
+    goal.target.point.x, goal.target.point.y = float(target[0]), float(target[1])
+    return goal
+
+
 class PainterNode(Node, PainterRigPort):
     """See the module docstring."""
 
@@ -94,8 +109,6 @@ class PainterNode(Node, PainterRigPort):
         # and the painter took a tenth of a core doing so while it heated
         self._frames = None
         self.sun = None
-        self.stats = None
-        self.stats_wall = 0.0
         self.faults = {}
         self._stats_waiters = []
         self._live_stats_stamp = None   # the stamp of the last thermal frame not frozen [s]
@@ -139,7 +152,6 @@ class PainterNode(Node, PainterRigPort):
         self.sweep = ActionClient(self, SweepSun, 'sweep_sun')
         self.wrist = ActionClient(self, MoveWrist, 'move_wrist')
         self.arm = ActionClient(self, MoveArm, 'move_arm')   # the lift when the wrist is down
-        self._focus_handles = []
         self.emergency = EmergencyStopListener(self, self._on_emergency_stop)
         ActionServer(self, PaintPattern, 'paint', self._execute,
                      goal_callback=lambda goal: GoalResponse.ACCEPT,
@@ -151,7 +163,6 @@ class PainterNode(Node, PainterRigPort):
     # ---- inputs ---------------------------------------------------------------------------
 
     def _on_stats(self, message):
-        self.stats, self.stats_wall = message, time.monotonic()
         if not message.frozen:
             self._live_stats_stamp = stamp_to_seconds(message.header.stamp)
         for waiter in list(self._stats_waiters):
@@ -255,18 +266,15 @@ class PainterNode(Node, PainterRigPort):
                 self._rgb_camera = None
             self._rgb_info_key = key
 
-    # ---- the port (painter_port.PainterRigPort) --------------------------------------------
+    # ---- the port: painter_port.PainterRigPort says what each method does ----------------
 
     def now(self):
-        """Return the node clock [s]."""
         return self.get_clock().now().nanoseconds * 1e-9
 
     def wall_now(self):
-        """Return the steady wall clock [s]."""
         return time.monotonic()
 
     def unix_now(self):
-        """Return the Unix time [s]."""
         return time.time()
 
     async def pause(self, seconds):
@@ -278,37 +286,29 @@ class PainterNode(Node, PainterRigPort):
         return self.context.ok()
 
     async def wait_until(self, ready, what):
-        """Wait until `ready()`, at most ``server_timeout`` of wall time; else TimeoutError."""
         await discovered(self, ready, self.settings.server_timeout, what)
 
     def joints(self):
-        """Return every joint's latest position, by name [rad]."""
         return self.joints_now
 
     def sun_ray(self):
-        """Return (s0 robot frame, its stamp [s]) of the sun estimate used, or None."""
         if self.sun is None:
             return None
         return point_to_array(self.sun.direction), stamp_to_seconds(self.sun.header.stamp)
 
     def use_sun_estimate(self, estimate):
-        """Take `estimate` (SunEstimate) as the sun's."""
         self.sun = estimate
 
     def cancel_requested(self):
-        """Return whether the painting must end (a cancel, a stop signal, the stop)."""
         return self._cancel_requested
 
     def client_canceled(self):
-        """Return whether the goal's client asked for the cancel."""
         return self._goal_handle is not None and self._goal_handle.is_cancel_requested
 
     def stop_signal(self):
-        """Return why the node stops mid-painting ('' while it does not)."""
         return self._stop_signal
 
     def emergency_engaged(self):
-        """Return whether the emergency stop is engaged."""
         return self.emergency.engaged
 
     def device_faults(self):
@@ -319,35 +319,27 @@ class PainterNode(Node, PainterRigPort):
                      'stopped?)') for device, seconds in silent.items()]
 
     async def focus(self, target, d_lp, travel_d_lp=0.0, urgent=False):
-        """Focus the lens on world `target` at `d_lp` (``focus`` goal); return its result."""
-        goal = FocusLens.Goal(d_lp=float(d_lp), travel_d_lp=float(travel_d_lp))
-        goal.target.header.frame_id = 'world'
-        goal.target.point.x, goal.target.point.y = float(target[0]), float(target[1])
-        return await self._run_action(self.focus_client, 'focus', goal, urgent)
+        return await self._run_action(self.focus_client, 'focus',
+                                      _focus_goal(target, d_lp, travel_d_lp), urgent)
 
     async def escape_wrist(self, yaw, pitch):
-        """Turn the wrist to (yaw, pitch) [rad] (``move_wrist`` escape goal); return result."""
         return await self._run_action(self.wrist, 'move_wrist',
                                       MoveWrist.Goal(yaw=yaw, pitch=pitch, escape=True),
                                       urgent=True, last=True)
 
     async def lift_arm(self, joints):
-        """Move the arm to joints j1..j4 [rad] (``move_arm`` goal); return its result."""
         goal = MoveArm.Goal(mode=MoveArm.Goal.MOVJ_ANGLE, target=list(joints))
         return await self._run_action(self.arm, 'move_arm', goal, urgent=True, last=True)
 
     async def calibrate_rig(self):
-        """Run ``calibrate_rig`` (applied); return its result."""
         return await self._run_action(self.rig_calibration, 'calibrate_rig',
                                       CalibrateRig.Goal(apply=True))
 
     async def calibrate_world(self):
-        """Run ``calibrate_world`` (applied); return its result."""
         return await self._run_action(self.world, 'calibrate_world',
                                       CalibrateWorld.Goal(apply=True))
 
     async def sweep_sun(self):
-        """Run ``sweep_sun``; return its result."""
         return await self._run_action(self.sweep, 'sweep_sun', SweepSun.Goal())
 
     async def next_stats(self, stale_after=None):
@@ -359,7 +351,6 @@ class PainterNode(Node, PainterRigPort):
         """
         settings = self.settings
         waiter = FirstOf()
-        self._stats_waiters.append(waiter)
         # stale on the node clock only once the statistics queued meanwhile were taken
         node_timer = self.create_timer(
             settings.thermal_stale if stale_after is None else min(settings.thermal_stale,
@@ -367,15 +358,9 @@ class PainterNode(Node, PainterRigPort):
             lambda: self._next_turn.call(lambda: waiter.offer(None)))
         wall_timer = self.create_timer(settings.thermal_stale_wall, lambda: waiter.offer(None),
                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
-        try:
-            return await waiter
-        finally:
-            self._stats_waiters.remove(waiter)
-            self.destroy_timer(node_timer)
-            self.destroy_timer(wall_timer)
+        return await self._offered(waiter, self._stats_waiters, waiter, node_timer, wall_timer)
 
     def live_stats_stamp(self):
-        """Return the stamp [s] of the last thermal frame that was not frozen, or None."""
         return self._live_stats_stamp
 
     async def wait_for_spots(self, back, timeout):
@@ -385,18 +370,11 @@ class PainterNode(Node, PainterRigPort):
         def on_spot(message):
             if back(message.valid):
                 done.offer(True)
-        self._spot_waiters.append(on_spot)
         timer = self.create_timer(timeout, lambda: done.offer(False))
         cancel = self.create_timer(0.2, lambda: self._cancel_requested and done.offer(False))
-        try:
-            return await done
-        finally:
-            self._spot_waiters.remove(on_spot)
-            self.destroy_timer(timer)
-            self.destroy_timer(cancel)
+        return await self._offered(done, self._spot_waiters, on_spot, timer, cancel)
 
     def rgb_camera(self):
-        """Return the RGB camera's model, or None before its camera_info."""
         return self._rgb_camera
 
     async def next_rgb_image(self, since, timeout):
@@ -406,22 +384,29 @@ class PainterNode(Node, PainterRigPort):
             # raw: a frame is decoded only when a verification waits for it
             self._frames = self.create_subscription(Image, 'rgb/image_raw', self._on_frame,
                                                     qos_profile_sensor_data, raw=True)
-        self._frame_waiters.append((since, waiter))
         timer = self.create_timer(timeout, lambda: waiter.offer(None),
                                   clock=Clock(clock_type=ClockType.STEADY_TIME))
         try:
-            frame = await waiter
+            frame = await self._offered(waiter, self._frame_waiters, (since, waiter), timer)
         finally:
-            self._frame_waiters.remove((since, waiter))
-            self.destroy_timer(timer)
             if not self._frame_waiters and self._frames is not None:
                 self.destroy_subscription(self._frames)
                 self._frames = None
         return None if frame is None else image_to_numpy(frame)
 
+    async def _offered(self, waiter, waiters, entry, *timers):
+        """Return what `waiter` gets while `entry` is in `waiters`; then end it and `timers`."""
+        waiters.append(entry)
+        try:
+            return await waiter
+        finally:
+            waiters.remove(entry)
+            for timer in timers:
+                self.destroy_timer(timer)
+
     def publish_feedback(self, feedback):
         """Publish the running goal's feedback (painter_port.PaintFeedback)."""
-        self._goal_handle.publish_feedback(PaintPattern.Feedback(**asdict(feedback)))
+        self._goal_handle.publish_feedback(_message(PaintPattern.Feedback, feedback))
 
     def set_window(self, target):
         """Publish the N_p window at world `target` (``window_radius``); None: no window."""
@@ -473,11 +458,7 @@ class PainterNode(Node, PainterRigPort):
         handle = sent.result()
         if not handle.accepted:
             raise PaintFailed(f'{name} refused the goal')
-        self._focus_handles.append(handle)
-        try:
-            return (await handle.get_result_async()).result
-        finally:
-            self._focus_handles.remove(handle)
+        return (await handle.get_result_async()).result
 
     async def _execute(self, goal_handle):
         if self._busy or self.emergency.engaged:
@@ -496,7 +477,7 @@ class PainterNode(Node, PainterRigPort):
             self.get_logger().info(f'paint: {result.message}')
         else:
             self.get_logger().warning(f'paint: {result.message}')
-        return PaintPattern.Result(**asdict(result))
+        return _message(PaintPattern.Result, result)
 
     async def on_interrupt(self):
         """
@@ -519,11 +500,9 @@ class PainterNode(Node, PainterRigPort):
         """Leave the lens off the wood if a painting is cut short (best effort)."""
         if self.painting.dot.at_heating is not None:
             target, d_lp = self.painting.dot.at_heating
-            goal = FocusLens.Goal(d_lp=float(d_lp + self.settings.retreat_offset))
-            goal.target.header.frame_id = 'world'
-            goal.target.point.x, goal.target.point.y = float(target[0]), float(target[1])
             if self.focus_client.server_is_ready():
-                self.focus_client.send_goal_async(goal)
+                self.focus_client.send_goal_async(
+                    _focus_goal(target, d_lp + self.settings.retreat_offset))
                 self.get_logger().warning('stopping while heating: retreat sent')
         return super().destroy_node()
 
