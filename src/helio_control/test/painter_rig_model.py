@@ -111,7 +111,9 @@ class RigModel(PainterRigPort):
         self.clouds = []               # (begin, end) [s] of no sun
         self.stream_down = []          # (begin, end) [s] without thermal frames
         self.frozen = []               # (begin, end) [s] of frozen frames
-        self.cancel_at = math.inf
+        self.cancel_at = math.inf      # the client cancels the goal
+        self.stop_at = math.inf        # a stop signal (Ctrl-C, SIGTERM) to the node
+        self.emergency_at = math.inf   # the emergency stop engages
         self.cancel_in_heating = None  # (n, delay): a cancel `delay` [s] into heating n (1...)
         self.fault_at = math.inf       # a servo alarm from then on
         self.sun = (SUN, START)
@@ -212,16 +214,18 @@ class RigModel(PainterRigPort):
         self.sun = (SUN, START)
 
     def cancel_requested(self):
-        return self.t >= self.cancel_at
+        return self.t >= min(self.cancel_at, self.stop_at, self.emergency_at)
 
     def client_canceled(self):
-        return self.cancel_requested()
+        return self.t >= self.cancel_at
 
     def stop_signal(self):
-        return ''
+        if self.emergency_engaged():
+            return 'the EMERGENCY STOP'
+        return 'a stop signal' if self.t >= self.stop_at else ''
 
     def emergency_engaged(self):
-        return False
+        return self.t >= self.emergency_at
 
     def device_faults(self):
         return [('servo', 'servo alarm: overload')] if self.t >= self.fault_at else []
@@ -253,8 +257,9 @@ class RigModel(PainterRigPort):
         return SimpleNamespace(success=True, message='', estimate=None)
 
     def _wake_up(self, until):
-        """Return the time of a cancel or fault not yet told, in (now, until], or None."""
-        for name, at in (('cancel', self.cancel_at), ('fault', self.fault_at)):
+        """Return the time of a stop or fault not yet told, in (now, until], or None."""
+        for name, at in (('cancel', self.cancel_at), ('stop', self.stop_at),
+                         ('emergency', self.emergency_at), ('fault', self.fault_at)):
             if name not in self._woken and at <= until:
                 self._woken.add(name)
                 return max(at, self.t)

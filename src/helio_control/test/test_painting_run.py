@@ -67,6 +67,30 @@ def test_a_cancel_while_heating_retreats_the_lens_and_ends_the_goal_canceled(tmp
     assert journal.dots == [] and journal.result.message == result.message
 
 
+@pytest.mark.parametrize('stop, ending, message', [
+    ('stop_at', 'abort', 'stopped by a stop signal: retreated (a stop signal)'),
+    ('fault_at', 'abort', 'device fault: servo alarm: overload; the wrist could not move '
+                          '(servo alarm: overload); the arm lifted the lens'),
+])
+def test_a_stop_signal_or_a_fault_while_heating_takes_the_focus_off_and_aborts(
+        tmp_path, stop, ending, message):
+    result, got, model = paint(tmp_path, goal_of(ROW, tmp_path / 'runs' / stop), **{stop: 3.0})
+    assert (got, result.message) == (ending, message)
+    [(since, until)] = model.heated(ROW[0])
+    assert until == pytest.approx(3.0)                     # woken at once
+    assert model.lens is None or model.lens[1] > model.settings.heating_distance
+
+
+def test_the_emergency_stop_ends_the_goal_and_moves_nothing_more(tmp_path):
+    # the drivers took the focus off the wood themselves (node_kit.emergency_stop)
+    result, ending, model = paint(tmp_path, goal_of(ROW, tmp_path / 'runs' / 'stop'),
+                                  emergency_at=3.0)
+    assert ending == 'abort' and result.message == (
+        'stopped by the EMERGENCY STOP: the drivers stopped the arm and turned the lens off '
+        'the sun')
+    assert [at for at, *_ in model.moves if at >= 3.0] == [] and model.escapes == []
+
+
 def test_the_same_goal_again_resumes_at_the_first_unburnt_dot_and_burns_none_twice(tmp_path):
     runs = tmp_path / 'runs'
     # the first run is canceled 1 s into the heating of its third dot
