@@ -119,7 +119,7 @@ class RigModel(PainterRigPort):
         self.sun = (SUN, START)
         self.heatings = []             # [target, since, until] of the focus on the wood
         self.frames = []               # (time, the wood's N_p of each dot) of every frame
-        self.moves = []                # (time, target, d_lp, urgent) of every focus goal
+        self.moves = []                # (time, target, d_lp, travel d_lp, urgent) of each focus
         self.escapes = []              # (time, 'wrist' or 'arm')
         self.feedback = []
         self.windows = []
@@ -174,10 +174,17 @@ class RigModel(PainterRigPort):
                 if where == tuple(target)]
 
     def _reading(self):
-        hottest = max(self.rise.values(), default=0.0)
-        return SimpleNamespace(n_p=sum(self.wood.n_p(r) for r in self.rise.values()),
-                               t_max=AMBIENT + hottest, window_valid=False, window_n_p=0,
-                               window_t_max=0.0, camera_cap=CAP, frozen=False)
+        """Return the thermal statistics of the wood now (the window's: the last set)."""
+        window = self.windows[-1] if self.windows else None
+        near = {} if window is None else {
+            target: rise for target, rise in self.rise.items()
+            if math.dist(target, window) <= self.settings.window_radius}
+        return SimpleNamespace(
+            n_p=sum(self.wood.n_p(rise) for rise in self.rise.values()),
+            t_max=AMBIENT + max(self.rise.values(), default=0.0), window_valid=bool(near),
+            window_n_p=sum(self.wood.n_p(rise) for rise in near.values()),
+            window_t_max=AMBIENT + max(near.values(), default=0.0), camera_cap=CAP,
+            frozen=False)
 
     # ---- the port -------------------------------------------------------------------------
 
@@ -231,7 +238,7 @@ class RigModel(PainterRigPort):
         return [('servo', 'servo alarm: overload')] if self.t >= self.fault_at else []
 
     async def focus(self, target, d_lp, travel_d_lp=0.0, urgent=False):
-        self.moves.append((self.t, tuple(target), d_lp, urgent))
+        self.moves.append((self.t, tuple(target), d_lp, travel_d_lp, urgent))
         self._place(None, 0.0)
         self.advance(MOVE)
         self._place(target, d_lp)
@@ -314,4 +321,4 @@ class RigModel(PainterRigPort):
         self.feedback.append((self.t, feedback.phase, feedback.index, feedback.n_p))
 
     def set_window(self, target):
-        self.windows.append(target)
+        self.windows.append(None if target is None else tuple(float(v) for v in target))

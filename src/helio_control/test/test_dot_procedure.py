@@ -154,7 +154,7 @@ def test_a_cancel_while_heating_ends_the_dot_at_once(tmp_path):
     assert procedure.at_heating == (pytest.approx(TARGET), model.settings.heating_distance)
     assert run(procedure.retreat('cancel')) == 'retreated (cancel)'
     [(since, until)] = model.heated(TARGET)
-    assert until == pytest.approx(2.0) and model.moves[-1][3]      # the urgent retreat
+    assert until == pytest.approx(2.0) and model.moves[-1][4]      # the urgent retreat
 
 
 def test_the_sun_is_back_after_frames_in_a_row_only():

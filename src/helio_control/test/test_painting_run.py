@@ -59,12 +59,29 @@ def test_a_cancel_while_heating_retreats_the_lens_and_ends_the_goal_canceled(tmp
     assert result.message == 'canceled: retreated (cancel)'
     [(since, until)] = model.heated(ROW[0])
     assert until == pytest.approx(3.0)                     # woken at the cancel
-    at, where, d_lp, urgent = model.moves[-1]
+    at, where, d_lp, _, urgent = model.moves[-1]
     assert urgent and where == pytest.approx(ROW[0]) and d_lp == pytest.approx(
         model.settings.heating_distance + model.settings.retreat_offset)
     assert model.t == pytest.approx(3.0 + MOVE)
     journal = read_journal(str(run_dir / 'journal.jsonl'))
     assert journal.dots == [] and journal.result.message == result.message
+
+
+def test_the_window_rule_goes_on_at_once_and_retreats_after_the_last_dot(tmp_path):
+    result, ending, model = paint(tmp_path, goal_of(ROW, tmp_path / 'runs' / 'window',
+                                                    cooling='window'))
+    assert ending == 'succeed' and result.dots_burnt == 4, result.message
+    settings = model.settings
+    heat, travel = settings.heating_distance, settings.window_travel_offset
+    # one focus goal per dot, travelling beyond the heating distance; no retreat between
+    # the dots, one after the last
+    assert [move[1:] for move in model.moves] == [
+        (pytest.approx(target), heat, pytest.approx(heat + travel), False) for target in ROW
+    ] + [(pytest.approx(ROW[-1]), pytest.approx(heat + settings.retreat_offset), 0.0, True)]
+    heatings = [model.heated(target) for target in ROW]
+    assert [len(intervals) for intervals in heatings] == [1, 1, 1, 1]
+    for (_, until), [(since, _)] in zip([h[0] for h in heatings], heatings[1:]):
+        assert since == pytest.approx(until + MOVE)      # no wait for N_p = 0
 
 
 @pytest.mark.parametrize('stop, ending, message', [
