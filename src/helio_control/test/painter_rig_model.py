@@ -29,6 +29,7 @@ from helio_control.painter_port import PainterRigPort, PainterSettings
 from helio_optics.ephemeris import Site
 from helio_optics.geometry import unit
 from helio_optics.rig_kinematics import Rig
+from helio_perception.char_dots import DotMeasure
 import numpy as np
 import yaml
 
@@ -80,6 +81,7 @@ class Wood:
     width: float = 0.6e-3      # w of the hot region [m]
     pixel: float = 0.25e-3     # side of a thermal pixel on the wood [m]
     depth_of_focus: float = 0.004   # defocus that halves the concentration g [m]
+    char_rise: float = 20.0    # the wood chars where its rise has reached this [K]
 
     def concentration(self, defocus):
         """Return g, the focus' share of its peak irradiance, at a defocus [m] [-]."""
@@ -91,6 +93,12 @@ class Wood:
             return 0
         return int(math.pi * self.width ** 2 * math.log(rise / self.threshold)
                    / self.pixel ** 2)
+
+    def char_diameter(self, peak):
+        """Return the diameter [m] of the char a dot whose rise peaked at `peak` [K] left."""
+        if peak <= self.char_rise:
+            return 0.0
+        return 2.0 * self.width * math.sqrt(math.log(peak / self.char_rise))
 
     def rise_reaching(self, n_p):
         """Return the smallest rise dT [K] whose N_p is `n_p` [-]."""
@@ -108,6 +116,8 @@ class RigModel(PainterRigPort):
         self.t = 0.0                   # model time since START [s]
         self.lens = None               # (target (x, y), d_lp) where the focus rests
         self.rise = {}                 # target -> dT of its hottest point [K]
+        self.peak = {}                 # target -> the highest dT it reached [K]
+        self.camera = False            # an RGB camera that measures the char (measure)
         self.clouds = []               # (begin, end) [s] of no sun
         self.stream_down = []          # (begin, end) [s] without thermal frames
         self.frozen = []               # (begin, end) [s] of frozen frames
@@ -150,6 +160,7 @@ class RigModel(PainterRigPort):
                 settled = self.wood.rise * power * gain
                 self.rise[target] = settled + (self.rise[target] - settled) * math.exp(
                     -dt / self.wood.tau)
+                self.peak[target] = max(self.peak.get(target, 0.0), self.rise[target])
             self.t += dt
 
     def true_n_p(self, target):
@@ -312,10 +323,18 @@ class RigModel(PainterRigPort):
         return False
 
     def rgb_camera(self):
-        return None
+        return 'camera' if self.camera else None
 
     async def next_rgb_image(self, since, timeout):
-        return None
+        self.advance(0.1)
+        return np.zeros((4, 4, 3), np.uint8)
+
+    def measure(self, image, camera, T_world_camera, target, expected, neighbours, settings):
+        """Measure the char at `target` as the RGB camera would (char_dots.measure_in_image)."""
+        diameter = self.wood.char_diameter(self.peak.get(tuple(target), 0.0))
+        charred = diameter >= settings.min_diameter_ratio * expected
+        return DotMeasure(charred, diameter, tuple(target), expected,
+                          '' if charred else f'char {diameter * 1e3:.2f} mm: too small')
 
     def publish_feedback(self, feedback):
         self.feedback.append((self.t, feedback.phase, feedback.index, feedback.n_p))

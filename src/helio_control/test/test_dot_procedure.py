@@ -10,6 +10,7 @@ dwell its first-order law needs to reach a target.
 
 import math
 
+from helio_control import dot_procedure
 from helio_control.dot_cycle import CycleSettings
 from helio_control.dot_procedure import DotProcedure, SunReturn
 from helio_control.painter_port import PaintCanceled, PaintFailed, PaintFeedback
@@ -155,6 +156,26 @@ def test_a_cancel_while_heating_ends_the_dot_at_once(tmp_path):
     assert run(procedure.retreat('cancel')) == 'retreated (cancel)'
     [(since, until)] = model.heated(TARGET)
     assert until == pytest.approx(2.0) and model.moves[-1][4]      # the urgent retreat
+
+
+@pytest.mark.parametrize('char_rise, heatings, verdict, outcome', [
+    (20.0, 1, 'charred', 'burnt'),
+    (70.0, 2, 'not charred', 'failed'),          # wood that chars only hotter (wet wood)
+])
+def test_the_camera_checks_each_dot_and_a_dot_without_char_is_heated_again_once(
+        tmp_path, monkeypatch, char_rise, heatings, verdict, outcome):
+    model, procedure = dot_rig(tmp_path, verify_dots=True)
+    model.camera, model.wood.char_rise = True, char_rise
+    monkeypatch.setattr(dot_procedure, 'measure_in_image', model.measure)
+    expected = 2.0e-3                                    # the plan's dot at N_p 30 [m]
+    record = run(procedure.paint(PaintFeedback(), 0, np.array(TARGET), 30, 'paper', False,
+                                 expected=expected))
+    assert len(model.heated(TARGET)) == heatings == record['reheats'] + 1
+    truth = model.wood.char_diameter(model.peak[TARGET])
+    assert (truth >= model.settings.verify_min_diameter_ratio * expected) == (
+        verdict == 'charred')
+    assert (record['verdict'], record['outcome']) == (verdict, outcome)
+    assert record['measured_diameter'] == pytest.approx(truth)
 
 
 def test_the_sun_is_back_after_frames_in_a_row_only():
