@@ -84,6 +84,24 @@ def test_the_window_rule_goes_on_at_once_and_retreats_after_the_last_dot(tmp_pat
         assert since == pytest.approx(until + MOVE)      # no wait for N_p = 0
 
 
+def test_the_window_rule_waits_for_a_cool_window_when_the_next_dot_lies_in_the_hot_region(
+        tmp_path):
+    close = [(0.05, 0.07), (0.053, 0.07)]                 # 3 mm: within window_separation
+    result, ending, model = paint(tmp_path, goal_of(close, tmp_path / 'runs' / 'close',
+                                                    cooling='window'))
+    assert ending == 'succeed' and result.dots_burnt == 2, result.message
+    settings = model.settings
+    # the first dot retreats (no urgency: the plain retreat of Algorithm 1) ...
+    assert [move[2:] for move in model.moves[:2]] == [
+        (settings.heating_distance, pytest.approx(settings.heating_distance
+                                                  + settings.window_travel_offset), False),
+        (pytest.approx(settings.heating_distance + settings.retreat_offset), 0.0, False)]
+    # ... and the second heats only once the first shows no N_p in its window
+    [(_, until)], [(since, _)] = model.heated(close[0]), model.heated(close[1])
+    last_look = max((t, n_p) for t, n_p in model.frames if until < t < since)
+    assert last_look[1][close[0]] == 0 and 0 < since - last_look[0] <= MOVE + 1e-9
+
+
 @pytest.mark.parametrize('stop, ending, message', [
     ('stop_at', 'abort', 'stopped by a stop signal: retreated (a stop signal)'),
     ('fault_at', 'abort', 'device fault: servo alarm: overload; the wrist could not move '
