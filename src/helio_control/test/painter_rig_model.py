@@ -126,6 +126,7 @@ class RigModel(PainterRigPort):
         self.emergency_at = math.inf   # the emergency stop engages
         self.cancel_in_heating = None  # (n, delay): a cancel `delay` [s] into heating n (1...)
         self.fault_at = math.inf       # a servo alarm from then on
+        self.arm_fault = (math.inf, math.inf)   # (begin, end) [s] of a Dobot link reset
         self.sun = (SUN, START)
         self.heatings = []             # [target, since, until] of the focus on the wood
         self.frames = []               # (time, the wood's N_p of each dot) of every frame
@@ -246,7 +247,12 @@ class RigModel(PainterRigPort):
         return self.t >= self.emergency_at
 
     def device_faults(self):
-        return [('servo', 'servo alarm: overload')] if self.t >= self.fault_at else []
+        faults = []
+        if self.arm_fault[0] <= self.t < self.arm_fault[1]:
+            faults.append(('dobot', 'dobot not connected (link reset)'))
+        if self.t >= self.fault_at:
+            faults.append(('servo', 'servo alarm: overload'))
+        return faults
 
     async def focus(self, target, d_lp, travel_d_lp=0.0, urgent=False):
         self.moves.append((self.t, tuple(target), d_lp, travel_d_lp, urgent))

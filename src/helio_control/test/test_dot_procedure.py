@@ -147,6 +147,24 @@ def test_a_servo_alarm_while_heating_leaves_the_retreat_to_the_arm_alone(tmp_pat
     assert procedure.at_heating is None
 
 
+def test_a_retreat_that_finds_no_way_is_tried_again_until_one_comes_back(tmp_path):
+    # both devices at fault at once (the Dobot's link reset as the servo driver died): no
+    # way to move the lens, until the Dobot is back half a second later
+    model, procedure = dot_rig(tmp_path)
+    model.fault_at, model.arm_fault = 2.0, (2.0, 2.5)
+    with pytest.raises(PaintFailed, match='device fault: dobot not connected'):
+        heat(procedure)
+    said = run(procedure.retreat('device fault'))
+    period = model.settings.retreat_retry_period
+    tries = 1 + math.ceil(0.5 / period)                 # the first try after 2.5 s works
+    assert said == ('the wrist could not move (servo alarm: overload); the arm lifted the '
+                    f'lens (at the try {tries}; the first: RETREAT FAILED: dobot not '
+                    'connected (link reset); servo alarm: overload)')
+    [(at, way)] = model.escapes
+    assert way == 'arm' and at == pytest.approx(2.0 + (tries - 1) * period)
+    assert procedure.at_heating is None
+
+
 def test_a_cancel_while_heating_ends_the_dot_at_once(tmp_path):
     model, procedure = dot_rig(tmp_path)
     model.cancel_at = 2.0
