@@ -121,6 +121,7 @@ class RigModel(PainterRigPort):
         self.clouds = []               # (begin, end) [s] of no sun
         self.stream_down = []          # (begin, end) [s] without thermal frames
         self.frozen = []               # (begin, end) [s] of frozen frames
+        self.window_blind = []         # (begin, end) [s] without a thermal camera pose
         self.cancel_at = math.inf      # the client cancels the goal
         self.stop_at = math.inf        # a stop signal (Ctrl-C, SIGTERM) to the node
         self.emergency_at = math.inf   # the emergency stop engages
@@ -188,6 +189,8 @@ class RigModel(PainterRigPort):
     def _reading(self):
         """Return the thermal statistics of the wood now (the window's: the last set)."""
         window = self.windows[-1] if self.windows else None
+        if any(begin <= self.t < end for begin, end in self.window_blind):
+            window = None              # no camera pose for this image: no window reading
         near = {} if window is None else {
             target: rise for target, rise in self.rise.items()
             if math.dist(target, window) <= self.settings.window_radius}

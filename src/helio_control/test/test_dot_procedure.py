@@ -135,6 +135,26 @@ def test_a_frozen_camera_is_heated_through_blind_for_thermal_freeze_max_only(
         assert intervals[1][0] >= freeze[1] and record['restarts'] == 1
 
 
+def test_the_window_rule_heats_on_without_a_window_reading_only_below_the_target(tmp_path):
+    model, procedure = dot_rig(tmp_path)
+    model.window_blind = [(1.5, 2.5)]            # early: the whole image is below N_p*
+    record = heat(procedure, cooling='window')
+    assert len(model.heated(TARGET)) == 1 and record['restarts'] == 0
+    assert record['outcome'] == 'burnt'
+
+
+def test_a_window_rule_dot_at_its_target_without_a_window_reading_retreats_in_time(tmp_path):
+    model, procedure = dot_rig(tmp_path)
+    reached = 0.8 + dwell_to_reach(model.wood, 30)     # the move, then the heating [s]
+    model.window_blind = [(reached - 1.0, reached + 2.0)]
+    record = heat(procedure, cooling='window')
+    first = model.heated(TARGET)[0]
+    # the image shows N_p* (the window might not): at most thermal_stale more, read on a frame
+    at_target = min(t for t, n_p in frames_while(model, *first) if n_p >= 30)
+    assert 0.0 < first[1] - at_target <= model.settings.thermal_stale + FRAME
+    assert record['outcome'] == 'burnt' and record['restarts'] >= 1
+
+
 def test_a_servo_alarm_while_heating_leaves_the_retreat_to_the_arm_alone(tmp_path):
     model, procedure = dot_rig(tmp_path)
     model.fault_at = 2.0
