@@ -1,11 +1,11 @@
 """
 Node painter: Algorithm 1 of the paper as the ``paint`` action (helio_msgs/PaintPattern).
 
-The procedures are not here: a goal is a ``painting_run.PaintingRun`` (check, calibrate,
-estimate the sun, plan or resume, the dots in order, the result), each dot a
-``dot_procedure.DotProcedure`` (Algorithm 1 lines 6-14, clouds, the fire-safety watchdog,
-the camera's check). They talk to the rig through a ``painter_port.PainterRigPort``, which
-this node implements over ROS:
+The procedures are not here (``helio_control.procedures``, no rclpy): a goal is a
+``painting_run.PaintingRun`` (check, calibrate, estimate the sun, plan or resume, the dots
+in order, the result), each dot a ``dot_procedure.DotProcedure`` (Algorithm 1 lines 6-14,
+clouds, the fire-safety watchdog, the camera's check). They talk to the rig through a
+``painter_port.PainterRigPort``, which this node implements over ROS:
 
 - moves are goals of the lens planner's actions (``focus``, ``calibrate_world``,
   ``calibrate_rig``, ``sweep_sun``) and, for the escapes, of the drivers' (``move_wrist``,
@@ -35,8 +35,8 @@ import time
 from geometry_msgs.msg import PointStamped
 from helio_control.driver_silence import DriverSilence
 from helio_control.painter_parameters import declare_painter_parameters, DYNAMIC
-from helio_control.painter_port import PainterRigPort, PaintFailed
-from helio_control.painting_run import PaintingRun
+from helio_control.procedures.painter_port import PainterRigPort, PaintFailed
+from helio_control.procedures.painting_run import PaintingRun
 from helio_msgs.action import CalibrateRig, CalibrateWorld, FocusLens, MoveArm, MoveWrist
 from helio_msgs.action import PaintPattern
 from helio_msgs.action import SweepSun

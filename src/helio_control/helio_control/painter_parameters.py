@@ -11,7 +11,7 @@ No rclpy import: it takes the node.
 
 import os
 
-from helio_control.painter_port import COOLING_RULES, PainterSettings
+from helio_control.procedures.painter_port import COOLING_RULES, PainterSettings
 from helio_optics.node_kit.deployment import declare_site
 from helio_optics.node_kit.parameters import declare
 from helio_perception.ground_plane import RESPONSES

@@ -18,14 +18,15 @@ records what the tests judge by: the intervals in which the focus rested on the 
 heating distance (``heatings``), every thermal frame delivered, the escapes.
 
 The procedures' coroutines await nothing but this port, whose waits return at once: ``run``
-drives one to its end with a single ``send``.
+(the lens planner's fake rig's) drives one to its end with a single ``send``.
 """
 
 from dataclasses import dataclass
 import math
 from types import SimpleNamespace
 
-from helio_control.painter_port import PainterRigPort, PainterSettings
+from fake_lens_rig import run  # noqa: F401 (the procedures' tests drive them with it)
+from helio_control.procedures.painter_port import PainterRigPort, PainterSettings
 from helio_optics.ephemeris import Site
 from helio_optics.geometry import unit
 from helio_optics.rig_kinematics import Rig
@@ -40,15 +41,6 @@ START = 1.7639e9           # the model's clock at its start: a Unix instant [s]
 SUN = unit(np.array([-0.3, 0.2, -1.0]))   # s0 (robot frame) that reaches the test canvas
 AMBIENT = 20.0             # [degC]
 CAP = 1000.0               # the thermal camera's read-out cap, out of the way [degC]
-
-
-def run(coroutine):
-    """Run a procedure's coroutine to its end (the model's waits never suspend)."""
-    try:
-        coroutine.send(None)
-    except StopIteration as done:
-        return done.value
-    raise AssertionError('the coroutine waited on something that is not the model')
 
 
 def settings(tmp_path, **overrides):

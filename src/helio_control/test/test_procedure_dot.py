@@ -10,10 +10,10 @@ dwell its first-order law needs to reach a target.
 
 import math
 
-from helio_control import dot_procedure
 from helio_control.dot_cycle import CycleSettings
-from helio_control.dot_procedure import DotProcedure, SunReturn
-from helio_control.painter_port import PaintCanceled, PaintFailed, PaintFeedback
+from helio_control.procedures import dot_procedure
+from helio_control.procedures.dot_procedure import DotProcedure, SunReturn
+from helio_control.procedures.painter_port import PaintCanceled, PaintFailed, PaintFeedback
 import numpy as np
 from painter_rig_model import FRAME, MOVE, RigModel, run, settings, SPOT_PERIOD
 import pytest

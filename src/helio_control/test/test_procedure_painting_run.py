@@ -8,7 +8,7 @@ dots the focus rested on, and when) and the journal as read back.
 """
 
 from geometry_msgs.msg import Point
-from helio_control.painting_run import PaintingRun
+from helio_control.procedures.painting_run import PaintingRun
 from helio_control.run_journal import read_journal
 from helio_msgs.action import PaintPattern
 from painter_rig_model import MOVE, RigModel, run, settings

@@ -1,12 +1,12 @@
 """
 What the painting needs from the rig: the painter's one port, its settings and its endings.
 
-The painting run (``helio_control.painting_run``: goal, plan, resume, the dots in order)
-and the dot (``helio_control.dot_procedure``: Algorithm 1 lines 6-14 with the fire-safety
-watchdog, clouds and the camera's check) are procedures; they talk to the rig, the lens
-planner, the cameras and the clock only through a ``PainterRigPort``. The painter node
-implements it over ROS (its actions, topics, timers and goal handle); a test implements it
-over a physical model of the rig and runs the procedures in-process in milliseconds.
+The painting run (``painting_run``: goal, plan, resume, the dots in order) and the dot
+(``dot_procedure``: Algorithm 1 lines 6-14 with the fire-safety watchdog, clouds and the
+camera's check) are procedures; they talk to the rig, the lens planner, the cameras and the
+clock only through a ``PainterRigPort``. The painter node implements it over ROS (its
+actions, topics, timers and goal handle); a test implements it over a physical model of the
+rig and runs the procedures in-process in milliseconds.
 
 Pure Python: no rclpy, no message import. What the port hands over is duck-typed: a thermal
 reading has the ``helio_msgs/ThermalStats`` fields the procedures read (``n_p``, ``t_max``,

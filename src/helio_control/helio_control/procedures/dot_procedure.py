@@ -40,7 +40,7 @@ Beyond the paper:
 """
 
 from helio_control.dot_cycle import CycleSettings, Decision, DotCycle
-from helio_control.painter_port import PaintCanceled, PaintFailed
+from helio_control.procedures.painter_port import PaintCanceled, PaintFailed
 from helio_optics.geometry import invert_transform
 from helio_optics.rig_kinematics import escape_lift, escape_pitch, JOINT_NAMES
 from helio_optics.rig_kinematics import UnreachableError

@@ -13,7 +13,7 @@ Per goal (paper Sec. IV-B and IV-C, Algorithm 1):
    estimate, the sun sweep (``sweep_sun``): lines 1-2;
 3. the plan (``helio_control.plan``): the picture (or the goal's points) to ordered world
    dots with per-dot N_p targets, checked against the rig's reach for the estimated sun;
-4. per dot, Algorithm 1 lines 6-14 (``helio_control.dot_procedure``); the sun estimate
+4. per dot, Algorithm 1 lines 6-14 (``helio_control.procedures.dot_procedure``); the sun estimate
    follows the sun by Eq 18 (``sun_estimator`` republishes it).
 
 Beyond the paper:
@@ -45,13 +45,13 @@ import traceback
 
 from helio_control import sky
 from helio_control.dot_check import expected_dot
-from helio_control.dot_procedure import DotProcedure
 from helio_control.dot_size_calibration import dot_size_for_painting, options_for_dot_size
-from helio_control.painter_port import COOLING_RULES, PaintCanceled, PaintFailed
-from helio_control.painter_port import PaintFeedback, PaintResult
 from helio_control.picture_input import picture_from_image_msg, PictureError
 from helio_control.plan import options_from_goal, Plan, plan_dots, plan_picture
 from helio_control.plan import PlanError, PlanOptionsError
+from helio_control.procedures.dot_procedure import DotProcedure
+from helio_control.procedures.painter_port import COOLING_RULES, PaintCanceled, PaintFailed
+from helio_control.procedures.painter_port import PaintFeedback, PaintResult
 from helio_control.run_journal import dots_left, goal_key, start_run, unfinished_run
 import numpy as np
 
