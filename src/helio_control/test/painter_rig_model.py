@@ -57,7 +57,8 @@ def settings(tmp_path, **overrides):
             flat[key] = value
     names = set(PainterSettings.__dataclass_fields__)
     values = {k: v for k, v in flat.items() if k in names}
-    values.update(runs_dir=str(tmp_path / 'runs'), site=Site(48.137, 11.575, 520.0),
+    values.update(runs_dir=str(tmp_path / 'runs'), calibration_dir=str(tmp_path / 'calibration'),
+                  site=Site(48.137, 11.575, 520.0),
                   verify_dots=False)
     values.update(overrides)
     return PainterSettings(**values)
