@@ -20,16 +20,27 @@ The run journal: what a painting did, one JSON object per line, written as it ha
 
 Every line is flushed when written, so a run that crashes keeps every finished dot; a
 reader accepts a last line cut off by a crash (``Journal.truncated``) and refuses anything
-else malformed with the line number. Pure Python: no rclpy.
+else malformed with the line number.
+
+Resume: a run directory also holds ``plan.json`` (the run's ``helio_control.plan.Plan``) and
+``resume.json`` (``{"goal_key", "burnt_before", "resumed_from"}``, ``start_run``). The same
+goal sent again (``goal_key``: its fields but ``NOT_THE_PICTURE``, and the picture's content)
+continues the newest unfinished run of it (``unfinished_run``) with that run's plan: the
+dots burnt there and in the runs it resumed are skipped, and ``dots_left`` are painted, none
+lost and none doubled. Pure Python: no rclpy.
 """
 
 from dataclasses import asdict, dataclass, field, fields, MISSING
+import glob
+import hashlib
 import json
 import math
 import os
 
 OUTCOMES = ('burnt', 'skipped', 'failed')
 VERDICTS = ('charred', 'not charred', '')
+# Goal fields that do not change what is painted (a resumed goal may differ in them).
+NOT_THE_PICTURE = ('run_dir', 'fresh', 'start_index', 'dry_run')
 
 
 class JournalError(ValueError):
@@ -274,3 +285,70 @@ def read_journal(path):
         else:
             journal.result = record
     return journal
+
+
+def goal_key(goal):
+    """
+    Return a key naming what a goal paints.
+
+    The goal's fields but NOT_THE_PICTURE, and the picture's content (an edited file is a
+    new painting).
+    """
+    painted = {k: v for k, v in goal_to_dict(goal).items() if k not in NOT_THE_PICTURE}
+    if goal.image_path and os.path.isfile(goal.image_path):
+        with open(goal.image_path, 'rb') as stream:
+            painted['image_sha256'] = hashlib.sha256(stream.read()).hexdigest()
+    if goal.image.width:
+        painted['image_sha256'] = hashlib.sha256(bytes(goal.image.data)).hexdigest()
+    return hashlib.sha256(json.dumps(painted, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def unfinished_run(runs_dir, key):
+    """
+    Return (run dir, burnt indices) of the newest unfinished run of the goal `key`, or None.
+
+    A run is unfinished when its journal has no result line or an unsuccessful one. The
+    burnt dots are those of its journal and of the runs it resumed (``resume.json``).
+    """
+    candidates = []
+    for resume in glob.glob(os.path.join(runs_dir, '*', 'resume.json')):
+        try:
+            with open(resume) as stream:
+                state = json.load(stream)
+        except (OSError, ValueError):
+            continue
+        if state.get('goal_key') == key:
+            candidates.append((os.path.getmtime(resume), os.path.dirname(resume), state))
+    for _, run_dir, state in sorted(candidates, reverse=True):
+        journal_path = os.path.join(run_dir, 'journal.jsonl')
+        try:
+            journal = read_journal(journal_path)
+        except (OSError, JournalError):
+            continue
+        if journal.result is not None and journal.result.success:
+            return None              # the newest run of this goal finished: start over
+        burnt = set(state.get('burnt_before', []))
+        burnt.update(dot.index for dot in journal.dots if dot.outcome == 'burnt')
+        return run_dir, burnt
+    return None
+
+
+def dots_left(count, burnt, start_index=0):
+    """Return the indices of a plan's `count` dots to paint: not `burnt`, from `start_index`."""
+    return [i for i in range(count) if i not in burnt and i >= start_index]
+
+
+def start_run(run_dir, plan_json, key, burnt, resumed_from=''):
+    """
+    Write a run's ``plan.json`` and ``resume.json`` in `run_dir` (made); return its journal.
+
+    `burnt`: the dots burnt by the runs it resumes, the newest of them `resumed_from`. The
+    JournalWriter appends to ``journal.jsonl``.
+    """
+    os.makedirs(run_dir, exist_ok=True)
+    with open(os.path.join(run_dir, 'plan.json'), 'w') as stream:
+        stream.write(plan_json)
+    with open(os.path.join(run_dir, 'resume.json'), 'w') as stream:
+        json.dump({'goal_key': key, 'burnt_before': sorted(burnt),
+                   'resumed_from': resumed_from}, stream)
+    return JournalWriter(os.path.join(run_dir, 'journal.jsonl'))

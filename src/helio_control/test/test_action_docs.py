@@ -3,8 +3,8 @@
 from helio_control.action_docs import field_comments, installed_action_text, listed_choices
 from helio_control.cli import goal_options
 from helio_control.features import FEATURE_MODES
-from helio_control.painter_node import COOLING_RULES
 from helio_control.path_ordering import ORDERINGS
+from helio_control.procedures.painter_port import COOLING_RULES
 from helio_msgs.action import PaintPattern
 import pytest
 
