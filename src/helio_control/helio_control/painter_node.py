@@ -43,6 +43,7 @@ from helio_msgs.action import SweepSun
 from helio_msgs.msg import DeviceStatus, FocalCalibration, SpotObservation, SunEstimate
 from helio_msgs.msg import ThermalStats
 from helio_optics.node_kit import emergency_stop
+from helio_optics.node_kit import topics
 from helio_optics.node_kit.awaitables import discovered, FirstOf, NextTurn, sleep, within
 from helio_optics.node_kit.conversions import camera_from_info, image_to_numpy
 from helio_optics.node_kit.conversions import point_to_array, stamp_to_seconds
@@ -102,7 +103,7 @@ class PainterNode(Node, PainterRigPort):
         self._rgb_camera = None
         self._rgb_info_key = None
         self._frame_waiters = []       # (since [s], FirstOf) of the verifications waiting
-        self.create_subscription(CameraInfo, 'rgb/camera_info', self._on_rgb_info,
+        self.create_subscription(CameraInfo, topics.RGB_CAMERA_INFO, self._on_rgb_info,
                                  qos_profile_sensor_data)
         # subscribed only while a verification waits for a frame (``next_rgb_image``): every
         # RGB frame taken is a megabyte copied out of DDS, 30 a second beside a world at 6x,
@@ -118,13 +119,14 @@ class PainterNode(Node, PainterRigPort):
         self._goal_handle = None           # the paint goal running
         self._cancel_requested = False
         self._stop_signal = ''             # why the node stops mid-painting ('' while not)
-        self.create_subscription(ThermalStats, 'thermal/stats', self._on_stats, RELIABLE)
-        self.create_subscription(SunEstimate, 'sun/estimate', self._on_sun, LATCHED)
-        self.create_subscription(FocalCalibration, 'calibration/focus', self._on_focus_cal,
+        self.create_subscription(ThermalStats, topics.THERMAL_STATS, self._on_stats, RELIABLE)
+        self.create_subscription(SunEstimate, topics.SUN_ESTIMATE, self._on_sun, LATCHED)
+        self.create_subscription(FocalCalibration, topics.FOCUS_CALIBRATION, self._on_focus_cal,
                                  LATCHED)
-        self.create_subscription(SpotObservation, 'spot', self._on_spot, RELIABLE)
+        self.create_subscription(SpotObservation, topics.SPOT, self._on_spot, RELIABLE)
         for device in ('dobot', 'servo'):
-            self.create_subscription(DeviceStatus, f'{device}/status', self._on_status, LATCHED)
+            self.create_subscription(DeviceStatus, topics.device_status(device), self._on_status,
+                                     LATCHED)
         # the drivers' joint states on the wall clock, the painter's own pauses not counted
         pause = min(LONGEST_RUN_GAP, 0.5 * settings.device_silence)
         self.drivers = DriverSilence(settings.device_silence, pause)
@@ -132,8 +134,8 @@ class PainterNode(Node, PainterRigPort):
         self.create_timer(pause / 5.0, self._watch_drivers,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.joints_now = {}               # every joint's latest position, by name [rad]
-        self.create_subscription(JointState, 'joint_states', self._on_joints, 20)
-        self.window_publisher = self.create_publisher(PointStamped, 'thermal/window', LATCHED)
+        self.create_subscription(JointState, topics.JOINT_STATES, self._on_joints, 20)
+        self.window_publisher = self.create_publisher(PointStamped, topics.THERMAL_WINDOW, LATCHED)
         # the lens planner's focus lease (helio_optics.node_kit.focus_lease): while this heartbeat
         # lives, a lens left at the heating distance is the painter's to watch; a painter
         # killed outright stops it, and the lens planner retreats the lens
@@ -142,7 +144,7 @@ class PainterNode(Node, PainterRigPort):
         # does not leave the lens on the wood for simulated seconds while it cannot watch
         # (and the lease then does not expire for a painter that is merely slow); on the wall
         # clock it goes on while /clock pauses.
-        self.heartbeat_publisher = self.create_publisher(Header, 'painter/heartbeat', 10)
+        self.heartbeat_publisher = self.create_publisher(Header, topics.PAINTER_HEARTBEAT, 10)
         self.create_timer(settings.heartbeat_period, self._beat)
         self.create_timer(settings.heartbeat_period, self._beat,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -382,7 +384,7 @@ class PainterNode(Node, PainterRigPort):
         waiter = FirstOf()
         if self._frames is None:
             # raw: a frame is decoded only when a verification waits for it
-            self._frames = self.create_subscription(Image, 'rgb/image_raw', self._on_frame,
+            self._frames = self.create_subscription(Image, topics.RGB_IMAGE, self._on_frame,
                                                     qos_profile_sensor_data, raw=True)
         timer = self.create_timer(timeout, lambda: waiter.offer(None),
                                   clock=Clock(clock_type=ClockType.STEADY_TIME))
