@@ -92,11 +92,15 @@ class FoxgloveClient:
         """Wait until each topic of `counts` has that many messages; raise on timeout."""
         def done():
             return all(len(self.messages[t]) >= n for t, n in counts.items())
+        self.wait_until(done, timeout, lambda: f'{ {t: len(self.messages[t]) for t in counts} }'
+                        f' of {counts}')
+
+    def wait_until(self, done, timeout, what):
+        """Wait until `done()` holds (checked at each message); raise naming `what()`."""
         with self._changed:
             if not self._changed.wait_for(lambda: done() or self.error or
                                           not self._thread.is_alive(), timeout) or not done():
-                have = {t: len(self.messages[t]) for t in counts}
-                raise AssertionError(f'Foxglove client: {have} of {counts} within {timeout} s'
+                raise AssertionError(f'Foxglove client: {what()} within {timeout} s'
                                      f' (error: {self.error!r})')
 
     def close(self):

@@ -382,6 +382,10 @@ def test_the_view_bridge_streams_the_painting_and_leaves_its_timing_alone(painti
         vanished = FoxgloveClient(port, CHECKED)
         clients = [reader, slow]
         assert all(c.subscribed.wait(30.0) for c in (reader, slow, vanished))
+        # the bridge fed: a scene with the lens (both drivers' joints heard). On an idle
+        # machine the next dot paints in 2.5 s, and its first scenes came before the joints
+        reader.wait_until(lambda: any(entity['id'] == 'lens' for scene in reader.decoded(
+            '/view/scene') for entity in scene['entities']), 60.0, lambda: 'no lens in a scene')
         vanished.close()
         cpu_before = cpu_seconds(bridge.pid)
         watched, watched_wall = paint_dot(graph, painter,
