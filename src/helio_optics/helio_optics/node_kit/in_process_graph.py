@@ -33,6 +33,8 @@ TRANSIENT_LOCAL_QOS = latched(10)
 
 # a goal request unanswered this long is sent again (``send_goal``) [s]
 GOAL_RESEND_AFTER = 10.0
+# a node's parameter read unanswered this long is sent again (``wait_for_nodes``) [s]
+NODE_ASK_AGAIN = 2.0
 
 
 class GraphTimeout(AssertionError):
@@ -261,8 +263,18 @@ class InProcessGraph:
             name = waiting[0]
             client = self.helper.create_client(GetParameters, f'{name}/get_parameters')
             try:
-                self.call(client, GetParameters.Request(names=['use_sim_time']),
-                          max(deadline - time.monotonic(), 0.0))
+                while True:
+                    # asked again every NODE_ASK_AGAIN s: a response written before the
+                    # server matched this client's reader is lost ("failed to send response
+                    # (timeout)", seen in a fresh run), and the request is not sent again
+                    remaining = deadline - time.monotonic()
+                    try:
+                        self.call(client, GetParameters.Request(names=['use_sim_time']),
+                                  max(min(NODE_ASK_AGAIN, remaining), 0.0))
+                        break
+                    except GraphTimeout:
+                        if time.monotonic() >= deadline:
+                            raise
             except GraphTimeout:
                 raise GraphTimeout(f'node(s) {", ".join(waiting)} did not answer within '
                                    f'{timeout:g} s (not started, or still starting)') from None
