@@ -31,6 +31,7 @@ import os
 import signal
 import sys
 import threading
+import time
 
 from helio_optics.config_files import config_path
 from helio_optics.node_kit.processes import NodeProcess, ProcessGroup
@@ -271,7 +272,6 @@ def wait_until_up(graph, specs, timeout):
     2026-11-28: "servo controller not connected ... no valid reply within the silence limit
     of 1.000 s"). A started graph is handed over only once it is up.
     """
-    import time
     deadline = time.monotonic() + timeout
     graph.wait_for_nodes([spec.name for spec in specs], timeout)
     devices = [DRIVER_DEVICES[spec.name] for spec in specs if spec.name in DRIVER_DEVICES]

@@ -221,13 +221,24 @@ class InProcessGraph:
         Unanswered, the goal is sent again, with a new goal id, every `resend_after` s
         until `timeout`.
         """
+        return self._asked_again(
+            lambda wait: self.on_executor(
+                lambda: client.send_goal_async(goal, feedback_callback=feedback), wait,
+                'the goal response'), timeout, resend_after)
+
+    @staticmethod
+    def _asked_again(ask, timeout, every):
+        """
+        Return ``ask(wait)``, asked again every `every` s until one answers within `timeout`.
+
+        `ask(wait)` sends its request and waits `wait` s for the answer (GraphTimeout when
+        none): for a request whose answer DDS may drop while the two sides are still matching.
+        """
         deadline = time.monotonic() + timeout
         while True:
-            wait = max(min(resend_after, deadline - time.monotonic()), 0.0)
+            wait = max(min(every, deadline - time.monotonic()), 0.0)
             try:
-                return self.on_executor(
-                    lambda: client.send_goal_async(goal, feedback_callback=feedback), wait,
-                    'the goal response')
+                return ask(wait)
             except GraphTimeout:
                 if time.monotonic() >= deadline:
                     raise
@@ -258,29 +269,20 @@ class InProcessGraph:
         """
         from rcl_interfaces.srv import GetParameters
         deadline = time.monotonic() + timeout
-        waiting = list(names)
-        while waiting:
-            name = waiting[0]
+        request = GetParameters.Request(names=['use_sim_time'])
+        for index, name in enumerate(names):
             client = self.helper.create_client(GetParameters, f'{name}/get_parameters')
             try:
-                while True:
-                    # asked again every NODE_ASK_AGAIN s: a response written before the
-                    # server matched this client's reader is lost ("failed to send response
-                    # (timeout)", seen in a fresh run), and the request is not sent again
-                    remaining = deadline - time.monotonic()
-                    try:
-                        self.call(client, GetParameters.Request(names=['use_sim_time']),
-                                  max(min(NODE_ASK_AGAIN, remaining), 0.0))
-                        break
-                    except GraphTimeout:
-                        if time.monotonic() >= deadline:
-                            raise
+                # asked again every NODE_ASK_AGAIN s: a response written before the server
+                # matched this client's reader is lost ("failed to send response (timeout)",
+                # seen in a fresh run), and the request is not sent again
+                self._asked_again(lambda wait: self.call(client, request, wait),
+                                  max(deadline - time.monotonic(), 0.0), NODE_ASK_AGAIN)
             except GraphTimeout:
-                raise GraphTimeout(f'node(s) {", ".join(waiting)} did not answer within '
+                raise GraphTimeout(f'node(s) {", ".join(names[index:])} did not answer within '
                                    f'{timeout:g} s (not started, or still starting)') from None
             finally:
                 self.helper.destroy_client(client)
-            waiting.pop(0)
 
     def wait_until(self, condition, timeout=DEFAULT_TIMEOUT, what='the condition'):
         """
