@@ -197,3 +197,14 @@ def test_lockstep_waits_for_the_slowest_of_several_sources_and_leaves_a_silent_o
     lockstep.seen(10.4, wall_now=1.2, source='dobot')     # plugged back in: held again
     assert not lockstep.left_behind(1.2) and lockstep.holding(10.7, 1.2) == ['dobot', 'servo',
                                                                              'thermal']
+
+
+def test_a_source_that_says_it_is_done_is_no_longer_waited_for():
+    lockstep = Lockstep(lead=0.2, timeout=1.5)
+    lockstep.seen(10.0, wall_now=0.0, source='lens/heating', lead=0.05)
+    assert lockstep.holding(10.1, 0.1) == ['lens/heating']   # past its own lead: held
+    lockstep.forget('lens/heating')                          # 'clear': nothing to watch
+    assert lockstep.holding(12.0, 0.2) == [] and not lockstep.left_behind(5.0)
+    lockstep.seen(12.0, wall_now=0.3, source='lens/heating')  # heating again: held again,
+    assert lockstep.holding(12.25, 0.3) == ['lens/heating']  # at the default lead now
+    lockstep.forget('never heard')                           # forgetting nothing is fine

@@ -16,6 +16,7 @@ from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters
 import numpy as np
 import pytest
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
@@ -255,7 +256,6 @@ def test_a_world_in_lockstep_never_runs_ahead_of_the_drivers_joint_states(tmp_pa
     # under use_sim_time (one every simulated step); one answers each tick only after a
     # wall-clock delay, as a driver starved of the CPU. The world waits for the slower: it
     # never gets more than lockstep_joint_lead (+ one step) past that driver's newest stamp.
-    from rclpy.time import Time
     from sensor_msgs.msg import JointState
     lead = 0.15
     with InProcessGraph('probe') as graph:
@@ -287,6 +287,46 @@ def test_a_world_in_lockstep_never_runs_ahead_of_the_drivers_joint_states(tmp_pa
         graph.wait_until(lambda: len(slow_stamps) > 60, timeout=120.0, what='60 answers')
         # (free, the world would step a tick every millisecond or two: 1-2 s ahead)
         assert max(ahead[-40:]) <= lead + node.world.settings.step + 1e-6, ahead[-40:]
+
+
+def test_a_world_holds_for_a_heartbeat_until_it_says_clear(tmp_path):
+    # A stand-in lens planner beats on lens/heating, stamped on the /clock it last heard,
+    # 20 ms of wall time late each tick (a process starved of the CPU): the world never gets
+    # more than lockstep_heartbeat_lead (+ one step) past its newest beat, so the servo
+    # driver's lease on those beats (0.15 s of node clock) cannot run out on a slow beater.
+    # Its 'clear' beat (the lens left the heating distance) lets the world run free at once.
+    from helio_optics.node_kit.focus_lease import CLEAR, HEATING, HEATING_TOPIC
+    from std_msgs.msg import Header
+    lead = 0.05
+    with InProcessGraph('probe') as graph:
+        node = graph.add(SimWorldNode(**graph.node_options(
+            real_time_factor=0.0, dobot_port=str(tmp_path / 'dobot'),
+            servo_port=str(tmp_path / 'servo'), rig_file=default_rig_file(), flux_rays=5000,
+            rgb_rate=0.0, thermal_rate=0.0, lockstep_topic='', lockstep_spot_topic='',
+            lockstep_joint_states=False, lockstep_heartbeat_lead=lead,
+            lockstep_timeout=60.0)))
+        beats = graph.helper.create_publisher(Header, HEATING_TOPIC, 10)
+        stamps, ahead, heating = [], [], [True]
+
+        def on_clock(clock):
+            if not heating[0]:
+                return
+            if stamps:                      # how far the world is past the newest beat
+                ahead.append(node.world.clock.nanoseconds() * 1e-9 - stamps[-1])
+            time.sleep(0.02)
+            beats.publish(Header(stamp=clock.clock, frame_id=HEATING))
+            stamps.append(Time.from_msg(clock.clock).nanoseconds * 1e-9)
+
+        graph.helper.create_subscription(Clock, '/clock', on_clock, QoSProfile(depth=1))
+        graph.wait_until(lambda: len(stamps) > 40, timeout=120.0, what='40 beats')
+        assert max(ahead[-30:]) <= lead + node.world.settings.step + 1e-6, ahead[-30:]
+        heating[0] = False
+        last = stamps[-1]
+        beats.publish(Header(stamp=Time(seconds=last).to_msg(), frame_id=CLEAR))
+        # free again: far past the last beat long before lockstep_timeout (60 s of wall
+        # time) would leave the beater behind
+        graph.wait_until(lambda: node.world.clock.nanoseconds() * 1e-9 > last + 2.0,
+                         timeout=30.0, what='the world past the clear beat')
 
 
 def test_a_held_world_sends_its_clock_again_for_a_source_that_missed_it(tmp_path):

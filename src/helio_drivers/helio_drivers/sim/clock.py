@@ -144,6 +144,11 @@ class Lockstep:
                 raise ValueError(f'lockstep lead must be > 0, got {lead}')
             self._leads[source] = float(lead)
 
+    def forget(self, source):
+        """Stop waiting for `source` until it answers again (it said it is done)."""
+        for table in (self._stamps, self._heard, self._leads):
+            table.pop(source, None)
+
     def hold(self, sim_now, wall_now):
         """Return whether the world should wait before simulating past `sim_now` [s]."""
         return bool(self.holding(sim_now, wall_now))

@@ -52,9 +52,11 @@ thermal monitor's answer to each thermal image) and on ``lockstep_spot_topic`` (
 spot detector's answer to each RGB image), and, with ``lockstep_joint_states``, at most
 ``lockstep_joint_lead`` ahead of the newest ``joint_states`` of each driver (each
 publisher's set of joint names is a source; the drivers read their device on every /clock
-tick and stamp on the node clock), and at most ``lockstep_lead`` ahead of the newest stamp
-on each of ``lockstep_heartbeats`` (``painter/heartbeat``, beating on the node clock: a
-painter starved of the CPU cannot leave the lens on the wood for simulated seconds). Real
+tick and stamp on the node clock), and at most ``lockstep_heartbeat_lead`` ahead of the
+newest stamp on each of ``lockstep_heartbeats`` (``painter/heartbeat`` and, while the lens
+planner holds the lens at the heating distance, ``lens/heating``; both beat on the node
+clock: a painter starved of the CPU cannot leave the lens on the wood for simulated seconds,
+and a beater that is merely slow never runs out its lease, node_kit.focus_lease). Real
 sensors and devices never run ahead of the software reading them, and so the graph's
 decisions depend on simulated time whatever the machine's load does to the ratio of the
 clocks: otherwise, on 2 busy cores, the painter's fire-safety watchdog (0.5 s of simulated
@@ -90,6 +92,7 @@ from helio_optics.node_kit.conversions import matrix_to_pose, restamped
 from helio_optics.node_kit.conversions import serialized_image, serialized_pose_stamped
 from helio_optics.node_kit.conversions import stamp_to_seconds
 from helio_optics.node_kit.deployment import rig_file_or_default, RIG_FILE_PARAMETER
+from helio_optics.node_kit.focus_lease import CLEAR, HEATING_TOPIC
 from helio_optics.node_kit.parameters import declare
 from helio_optics.node_kit.qos import LATCHED
 from helio_optics.node_kit.runner import run_node
@@ -410,15 +413,24 @@ class SimWorldNode(Node):
                    'joint_states too (each set of joint names is one source)'):
             self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_states,
                                      QoSProfile(depth=10))
+        # a heartbeat's lease (node_kit.focus_lease) must not expire on a beater that is merely
+        # slow: with this lead plus one step under the lease's node-clock timeout (0.15 s), a
+        # world held for the beats cannot run the lease out, whatever the machine's load
+        self._heartbeat_lead = declare(
+            self, 'lockstep_heartbeat_lead', 0.05,
+            'How far the world may run ahead of the newest stamp of each lockstep_heartbeats '
+            "topic [s simulated]: with one step, under the beats' leases (0.15 s)", 0.01, 60.0)
         for topic in declare(
-                self, 'lockstep_heartbeats', [topics.PAINTER_HEARTBEAT],
+                self, 'lockstep_heartbeats', [topics.PAINTER_HEARTBEAT, HEATING_TOPIC],
                 'std_msgs/Header topics stamped on the node clock (a controller that must '
-                'watch the world: the painter): the world runs at most lockstep_lead ahead of '
-                "each one's newest stamp ('' : none)"):
+                'watch the world: the painter; the lens planner while it holds the lens at '
+                'the heating distance): the world runs at most lockstep_heartbeat_lead ahead '
+                "of each one's newest stamp; a beat whose frame_id is 'clear' ends the topic "
+                "until its next beat ('' : none)"):
             if topic:
                 self.create_subscription(
-                    Header, topic, lambda message, source=topic: self._lockstep_seen(
-                        message.stamp, source), QoSProfile(depth=10))
+                    Header, topic, lambda message, source=topic: self._on_heartbeat(
+                        message, source), QoSProfile(depth=10))
         # less than a step: the world waits for each driver's report of every step, so a
         # joint state stamped t is the device as read at simulated time t (with one step of
         # lead, a moving arm's readings ran up to 0.25 s ahead of their stamps, and images
@@ -518,6 +530,12 @@ class SimWorldNode(Node):
         """Note a lockstep source's output stamped `stamp` (a Time message); wake the loop."""
         self._lockstep.seen(stamp_to_seconds(stamp), time.monotonic(), source, lead)
         self._lockstep_heard.set()
+
+    def _on_heartbeat(self, message, source):
+        if message.frame_id == CLEAR:        # the beater has nothing to watch any more
+            self._lockstep.forget(source)
+        else:
+            self._lockstep_seen(message.stamp, source, self._heartbeat_lead)
 
     def _on_joint_states(self, message):
         if message.name:          # one source per driver: its set of joint names
