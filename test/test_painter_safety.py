@@ -54,7 +54,7 @@ from helio_drivers.sim.world import charred_dots_of, SimSettings
 from helio_msgs.action import FocusLens, MoveArm, MoveWrist, PaintPattern
 from helio_msgs.msg import DeviceStatus, LightTruth, ThermalStats
 from helio_optics.node_kit.conversions import image_to_numpy, stamp_to_seconds
-from helio_optics.node_kit.in_process_graph import TRANSIENT_LOCAL_QOS
+from helio_optics.node_kit.in_process_graph import GraphTimeout, TRANSIENT_LOCAL_QOS
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
@@ -78,6 +78,7 @@ THERMAL_STALE = 0.5           # the painter's default thermal_stale [s]
 TRAVEL_D_LP = 0.112           # the painter's travel distance over the wood [m]: no heat
 EMERGENCY_BOUND = 0.3         # issue 30: the emergency stop's focus off the wood [s of sim time]
 ANSWER_TIMEOUT = 60.0         # [s] wall, a loaded machine
+END_TIMEOUT = 120.0           # [s] wall: a goal ending on a dead driver (1 s of silence)
 HELIO = [sys.executable, '-m', 'helio_control.cli']
 EVENT_PACE = 0.5              # the world's real-time factor around each event (see above)
 ENDED = (GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED)
@@ -337,11 +338,27 @@ def killed_driver_mid_dot(rig, label, y, x=0.074):
         return rig.now()
 
     delay, handle = painting_interrupted(rig, f'{label}_killed', y, kill, x=x)
-    result = rig.graph.goal_result(handle, TIMEOUT).result
+    # it ends: a goal waiting on the killed driver gives up once its joint states stop
+    # (device_silence, 1 s of wall time); CI once waited 900 s here for a retreat that the
+    # lens planner had sent to the dead driver
+    try:
+        result = rig.graph.goal_result(handle, END_TIMEOUT).result
+    except GraphTimeout as error:
+        raise AssertionError(f'{error}; the nodes said:\n{rig.logs()}') from None
     print(f'{label} killed: {result.message}')
     device = 'dobot' if label == 'dobot_driver' else 'servo'
     assert not result.success and device in result.message, result.message
     rig.assert_no_char_grows()
+    # a focus goal sent straight to the lens planner ends too, saying which driver is gone
+    # (silent, or no longer discovered): it never waits on a dead server
+    goal = FocusLens.Goal(d_lp=TRAVEL_D_LP)
+    goal.target.header.frame_id = 'world'
+    goal.target.point.x, goal.target.point.y = x, y
+    focus = rig.graph.run_goal(rig.focus, goal, timeout=END_TIMEOUT).result
+    print(f'focus with the {label} gone: {focus.message}')
+    names = {'dobot': ('dobot', 'move_arm'), 'servo': ('servo', 'move_wrist', 'lens_')}
+    assert not focus.success and any(name in focus.message for name in names[device]), \
+        focus.message
     return delay, result
 
 

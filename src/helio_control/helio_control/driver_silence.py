@@ -18,6 +18,18 @@ Pure Python: no rclpy. Times in seconds on one monotonic clock.
 
 import math
 
+# the device whose driver publishes a joint of this name prefix (helio_optics.rig_kinematics'
+# JOINT_NAMES: dobot_j1..j4 from the Dobot driver, lens_yaw and lens_pitch from the servos')
+DEVICE_OF_PREFIX = {'dobot_': 'dobot', 'lens_': 'servo'}
+
+
+def device_of(joint_names):
+    """Return the device ('dobot', 'servo') whose driver publishes `joint_names`, or ''."""
+    for prefix, device in DEVICE_OF_PREFIX.items():
+        if any(str(name).startswith(prefix) for name in joint_names):
+            return device
+    return ''
+
 
 class DriverSilence:
     """The drivers whose joint states stopped, not counting the watcher's own pauses."""

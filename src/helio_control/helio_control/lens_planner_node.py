@@ -30,12 +30,12 @@ spot stream and node-clock timers; nothing blocks, and the node runs in a plain
 ``rclpy.spin`` (one thread).
 """
 import math
-import os
 import time
 
 from geometry_msgs.msg import PoseStamped
 from helio_control.calibration_store import CalibrationRefused, load_calibration
 from helio_control.calibration_store import rig_description, save_calibration
+from helio_control.driver_silence import device_of, DriverSilence
 from helio_control.lens_planner_parameters import declare_heating_distance, declare_settings
 from helio_control.node_lens_rig import goal_runner, NodeLensRig, UNATTENDED
 from helio_control.procedures import focus
@@ -53,7 +53,8 @@ from helio_optics.node_kit import topics
 from helio_optics.node_kit.awaitables import FirstOf, sleep
 from helio_optics.node_kit.conversions import camera_from_info, matrix_to_pose
 from helio_optics.node_kit.conversions import point_to_array
-from helio_optics.node_kit.deployment import declare_lens, declare_rig, declare_site
+from helio_optics.node_kit.deployment import declare_calibration_dir, declare_lens, declare_rig
+from helio_optics.node_kit.deployment import declare_site
 from helio_optics.node_kit.deployment import follow_world_calibration, RIG_CALIBRATION_TOPIC
 from helio_optics.node_kit.emergency_stop import EmergencyStopListener
 from helio_optics.node_kit.focus_lease import CLEAR, declare_lease, HEATING, HEATING_TOPIC
@@ -116,10 +117,9 @@ class LensPlannerNode(Node):
         self.settle_time = declare(self, 'settle_time', 0.3,
                                    'Wait after a move before observing (node clock) [s].',
                                    0.0, 10.0)
-        calibration_dir = declare(self, 'calibration_dir', '',
-                                  'Where calibrations are saved (empty: ~/.helio/'
-                                  'calibration).')
-        self.calibration_dir = os.path.expanduser(calibration_dir or '~/.helio/calibration')
+        self.calibration_dir = declare_calibration_dir(
+            self, 'the robot-world, rig-build and focal calibrations are saved there and read '
+            'back at start')
         self.rig_description = rig_description(rig_file)
         load_calibrations = declare(
             self, 'load_calibrations', True,
@@ -142,6 +142,20 @@ class LensPlannerNode(Node):
             'On Ctrl-C or SIGTERM, how long a retreat of a lens left at the heating distance '
             'may take before the node stops [s wall].', 0.0, 60.0)
         self.driver_goals = []              # handles of the driver goals in flight
+        self.goal_accept_timeout = declare(
+            self, 'goal_accept_timeout', 5.0,
+            "A driver's move goal must be accepted within this much wall time, else the move "
+            'fails (a killed driver stays discovered for seconds and answers nothing) [s].',
+            0.1, 60.0)
+        # a driver killed mid-move never sends its result: its joint states stop (wall clock,
+        # this node's own pauses not counted), and the move is given up (issue 31)
+        device_silence = declare(
+            self, 'device_silence', 1.0,
+            "A move whose driver's joint states stop this long is given up and its goals "
+            'canceled [s wall].', 0.1, 60.0)
+        self.drivers = DriverSilence(device_silence, 0.5 * device_silence)
+        self.create_timer(0.1 * device_silence, lambda: self.drivers.tick(time.monotonic()),
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.spot_waiters = []
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state, 50)
         self.create_subscription(SunEstimate, topics.SUN_ESTIMATE, self._on_sun, LATCHED)
@@ -272,6 +286,9 @@ class LensPlannerNode(Node):
 
     def _on_joint_state(self, message):
         problem = self.joints.add_message(message, received=time.monotonic())
+        device = device_of(message.name)
+        if device:
+            self.drivers.heard(device, time.monotonic())
         if problem:
             self.get_logger().warning(problem, throttle_duration_sec=5.0)
 

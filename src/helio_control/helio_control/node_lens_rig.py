@@ -17,7 +17,8 @@ from helio_control.procedures.lens_rig_port import GoalCanceled, GoalFailed, Len
 from helio_msgs.action import FocusLens, MoveArm, MoveWrist
 from helio_msgs.srv import EstimateSun
 from helio_optics.node_kit import emergency_stop
-from helio_optics.node_kit.awaitables import discovered, FirstOf, in_thread, sleep, within
+from helio_optics.node_kit.awaitables import cancel_if_accepted, discovered, FirstOf, GoalTrouble
+from helio_optics.node_kit.awaitables import in_thread, results_unless, sleep, within
 from helio_optics.node_kit.conversions import stamp_from_seconds, stamp_to_seconds
 import numpy as np
 
@@ -254,22 +255,20 @@ class NodeLensRig(LensRigPort):
                                 target=[float(v) for v in x[:3]] + [0.0])
         wrist_goal = MoveWrist.Goal(yaw=float(x[3]), pitch=float(x[4]))
         handles = []
-        for client, goal, name in ((node.arm, arm_goal, 'move_arm'),
-                                   (node.wrist, wrist_goal, 'move_wrist')):
-            handle = await client.send_goal_async(goal)
-            if not handle.accepted:
-                for other in handles:
-                    other.cancel_goal_async()
-                raise GoalFailed(f'{name} refused the goal (another move running?)')
-            handles.append(handle)
-            node.driver_goals.append(handle)
-        # both results are asked for at once: a result asked for only after the other move
-        # ended can find the goal expired (a driver that accepted it before its first /clock
-        # stamped it 0, so once done it is 'older' than any result timeout) and comes back
-        # as an empty failure with status UNKNOWN
-        replies = [handle.get_result_async() for handle in handles]
         try:
-            arm_reply, wrist_reply = await replies[0], await replies[1]
+            for client, goal, name in ((node.arm, arm_goal, 'move_arm'),
+                                       (node.wrist, wrist_goal, 'move_wrist')):
+                handles.append(await self._accepted(client, goal, name))
+                node.driver_goals.append(handles[-1])
+            # a driver killed mid-move never answers (its server stays discovered for
+            # seconds): its silence ends the wait, and the goals are canceled
+            arm_reply, wrist_reply = await results_unless(node, handles, self._silent_drivers)
+        except GoalTrouble as trouble:
+            raise GoalFailed(f'the move was given up: {trouble}') from None
+        except GoalFailed:
+            for handle in handles:
+                handle.cancel_goal_async()
+            raise
         finally:
             for handle in handles:
                 node.driver_goals.remove(handle)
@@ -283,6 +282,25 @@ class NodeLensRig(LensRigPort):
         arm_result, wrist_result = arm_reply.result, wrist_reply.result
         return np.array([*arm_result.achieved_joints[:3], wrist_result.achieved_yaw,
                          wrist_result.achieved_pitch])
+
+    async def _accepted(self, client, goal, name):
+        """Send `goal`; return its handle once accepted (GoalFailed: refused, or no answer)."""
+        sent = client.send_goal_async(goal)
+        limit = self.node.goal_accept_timeout
+        if not await within(self.node, sent, limit, wall=True):
+            sent.add_done_callback(cancel_if_accepted)     # late: it must not move after all
+            raise GoalFailed(f'{name} did not accept the goal within {limit:g} s (is its '
+                             'driver running?)')
+        handle = sent.result()
+        if not handle.accepted:
+            raise GoalFailed(f'{name} refused the goal (another move running?)')
+        return handle
+
+    def _silent_drivers(self):
+        """Say which drivers' joint states stopped (device_silence of wall time), or ''."""
+        silent = self.node.drivers.silent(time.monotonic())
+        return '; '.join(f'{device} silent for {seconds:.1f} s (no joint states: driver '
+                         'stopped?)' for device, seconds in sorted(silent.items()))
 
     async def observe(self, count, accept):
         """Return `count` spot observations imaged after now (after the settle time)."""

@@ -33,7 +33,8 @@ import math
 import time
 
 from geometry_msgs.msg import PointStamped
-from helio_control.driver_silence import DriverSilence
+from helio_control.dot_size_calibration import dot_size_for_painting
+from helio_control.driver_silence import device_of, DriverSilence
 from helio_control.painter_parameters import declare_painter_parameters, DYNAMIC
 from helio_control.procedures.painter_port import PainterRigPort, PaintFailed
 from helio_control.procedures.painting_run import PaintingRun
@@ -44,7 +45,8 @@ from helio_msgs.msg import DeviceStatus, FocalCalibration, SpotObservation, SunE
 from helio_msgs.msg import ThermalStats
 from helio_optics.node_kit import emergency_stop
 from helio_optics.node_kit import topics
-from helio_optics.node_kit.awaitables import discovered, FirstOf, NextTurn, sleep, within
+from helio_optics.node_kit.awaitables import cancel_if_accepted, discovered, FirstOf, GoalTrouble
+from helio_optics.node_kit.awaitables import NextTurn, results_unless, sleep, within
 from helio_optics.node_kit.conversions import camera_from_info, image_to_numpy
 from helio_optics.node_kit.conversions import point_to_array, stamp_to_seconds
 from helio_optics.node_kit.deployment import declare_rig, follow_world_calibration
@@ -63,13 +65,6 @@ RELIABLE = reliable(20)
 # A steady tick this late says the painter itself did not run (DriverSilence): at most this,
 # and at most half device_silence [s wall].
 LONGEST_RUN_GAP = 0.5
-
-
-def _cancel_if_accepted(sent):
-    """Cancel the goal of a send future that completed after the painter gave up on it."""
-    handle = sent.result() if sent.done() and sent.exception() is None else None
-    if handle is not None and handle.accepted:
-        handle.cancel_goal_async()
 
 
 def _message(message_type, fields):
@@ -161,6 +156,20 @@ class PainterNode(Node, PainterRigPort):
         self.get_logger().info(f'painter: heating {settings.heating_distance * 100:.1f} cm, '
                                f'retreat {settings.retreat_offset * 100:.1f} cm, cooling rule '
                                f'{settings.cooling}, runs in {settings.runs_dir}')
+        self._say_dot_size_calibration()
+
+    def _say_dot_size_calibration(self):
+        """Log the dot-size calibration a painting will use (read again at each goal)."""
+        settings = self.settings
+        calibration, note = dot_size_for_painting(settings.calibration_dir, settings.rig_file)
+        if note:
+            self.get_logger().warning(note)
+        elif calibration is None:
+            self.get_logger().info(f'no dot-size calibration in {settings.calibration_dir}: '
+                                   "dots are sized by the goal's N_p target")
+        else:
+            self.get_logger().info(f'dot-size calibration read back from '
+                                   f'{settings.calibration_dir}: {calibration.summary()[0]}')
 
     # ---- inputs ---------------------------------------------------------------------------
 
@@ -189,8 +198,9 @@ class PainterNode(Node, PainterRigPort):
             waiter(message)
 
     def _on_joints(self, message):
-        device = 'servo' if 'lens_pitch' in message.name else 'dobot'
-        self.drivers.heard(device, time.monotonic())
+        device = device_of(message.name)
+        if device:
+            self.drivers.heard(device, time.monotonic())
         self.joints_now.update(zip(message.name, message.position))
 
     def _watch_drivers(self):
@@ -322,16 +332,18 @@ class PainterNode(Node, PainterRigPort):
 
     async def focus(self, target, d_lp, travel_d_lp=0.0, urgent=False):
         return await self._run_action(self.focus_client, 'focus',
-                                      _focus_goal(target, d_lp, travel_d_lp), urgent)
+                                      _focus_goal(target, d_lp, travel_d_lp), urgent,
+                                      devices=('dobot', 'servo'))
 
     async def escape_wrist(self, yaw, pitch):
         return await self._run_action(self.wrist, 'move_wrist',
                                       MoveWrist.Goal(yaw=yaw, pitch=pitch, escape=True),
-                                      urgent=True, last=True)
+                                      urgent=True, last=True, devices=('servo',))
 
     async def lift_arm(self, joints):
         goal = MoveArm.Goal(mode=MoveArm.Goal.MOVJ_ANGLE, target=list(joints))
-        return await self._run_action(self.arm, 'move_arm', goal, urgent=True, last=True)
+        return await self._run_action(self.arm, 'move_arm', goal, urgent=True, last=True,
+                                      devices=('dobot',))
 
     async def calibrate_rig(self):
         return await self._run_action(self.rig_calibration, 'calibrate_rig',
@@ -424,7 +436,7 @@ class PainterNode(Node, PainterRigPort):
 
     # ---- goals ----------------------------------------------------------------------------
 
-    async def _run_action(self, client, name, goal, urgent=False, last=False):
+    async def _run_action(self, client, name, goal, urgent=False, last=False, devices=()):
         """
         Send a goal and return its result (PaintFailed when refused).
 
@@ -436,7 +448,9 @@ class PainterNode(Node, PainterRigPort):
         `last` way (the wrist's escape, the arm's lift) has no next: it gets
         ``goal_accept_timeout``, and a late acceptance is better than none (a killed node can
         stall the others' DDS writes for a second: the wrist's driver then goes silent and
-        the arm's accepts late).
+        the arm's accepts late). A fault of one of the `devices` the goal moves (a driver
+        fallen silent: killed mid-move, its result never comes) ends the wait for the
+        result: the goal is canceled, and PaintFailed sends the painting to its retreat.
         """
         settings = self.settings
         if not urgent:
@@ -454,13 +468,20 @@ class PainterNode(Node, PainterRigPort):
             if urgent and not last:
                 # accepted after all, late (a loaded machine): cancelled, so that it does not
                 # move the lens against the next way the painter takes
-                sent.add_done_callback(_cancel_if_accepted)
+                sent.add_done_callback(cancel_if_accepted)
             raise PaintFailed(f'{name} did not accept the goal within {limit:g} s (is its node '
                               'running?)')
         handle = sent.result()
         if not handle.accepted:
             raise PaintFailed(f'{name} refused the goal')
-        return (await handle.get_result_async()).result
+
+        def device_fault():
+            return '; '.join(why for device, why in self.device_faults() if device in devices)
+        try:
+            reply, = await results_unless(self, [handle], device_fault)
+        except GoalTrouble as trouble:
+            raise PaintFailed(f'{name} given up: {trouble}') from None
+        return reply.result
 
     async def _execute(self, goal_handle):
         if self._busy or self.emergency.engaged:

@@ -58,3 +58,13 @@ def test_ordinary_tick_lateness_is_not_a_pause_and_an_unheard_driver_is_not_repo
 def test_limits_that_are_not_positive_are_refused(silence, pause):
     with pytest.raises(ValueError, match='must be > 0'):
         DriverSilence(silence, pause)
+
+
+def test_each_joint_name_belongs_to_the_driver_that_publishes_it():
+    from helio_control.driver_silence import device_of
+    from helio_optics.rig_kinematics import JOINT_NAMES
+    # the drivers' joint state messages (helio_drivers: dobot_driver, servo_driver)
+    assert device_of(['dobot_j1', 'dobot_j2', 'dobot_j3', 'dobot_j4']) == 'dobot'
+    assert device_of(['lens_yaw', 'lens_pitch']) == 'servo'
+    assert {device_of([name]) for name in JOINT_NAMES} == {'dobot', 'servo'}
+    assert device_of(['wheel_left']) == '' and device_of([]) == ''

@@ -91,3 +91,45 @@ def test_a_computation_on_a_thread_leaves_the_executor_serving_callbacks():
         release.set()
         graph.wait_until(task.done, 10.0, 'the task')
         assert task.result() == (42, 'no fit')
+
+
+def test_results_unless_returns_the_results_or_gives_up_on_trouble_and_cancels():
+    """A server that accepts and never answers (a killed driver) is given up on, canceled."""
+    from helio_msgs.action import MoveWrist
+    from helio_optics.node_kit.awaitables import GoalTrouble, results_unless
+    from rclpy.action import ActionClient, ActionServer, CancelResponse
+
+    canceled = []
+
+    async def execute(goal_handle):
+        if goal_handle.request.yaw > 0.0:          # the hung server: answers only a cancel
+            while not goal_handle.is_cancel_requested:
+                await sleep(graph.helper, 0.02, wall=True)
+            canceled.append(goal_handle.request.pitch)
+            goal_handle.canceled()
+            return MoveWrist.Result(message='canceled')
+        goal_handle.succeed()
+        return MoveWrist.Result(success=True, achieved_pitch=goal_handle.request.pitch)
+
+    trouble = []
+
+    async def procedure(yaw):
+        client = ActionClient(graph.helper, MoveWrist, 'wrist')
+        await discovered(graph.helper, client.server_is_ready, 10.0, 'wrist')
+        handles = [await client.send_goal_async(MoveWrist.Goal(yaw=yaw, pitch=pitch))
+                   for pitch in (0.25, 0.5)]
+        try:
+            replies = await results_unless(graph.helper, handles, lambda: ''.join(trouble),
+                                           poll=0.05)
+        except GoalTrouble as error:
+            return str(error)
+        return [reply.result.achieved_pitch for reply in replies]
+
+    with InProcessGraph() as graph:
+        ActionServer(graph.helper, MoveWrist, 'wrist', execute,
+                     cancel_callback=lambda _request: CancelResponse.ACCEPT)
+        assert run(graph, procedure(0.0)) == [0.25, 0.5]       # both results, in order
+        graph.helper.create_timer(0.3, lambda: trouble.append('servo silent for 1.0 s'))
+        assert run(graph, procedure(1.0)) == 'servo silent for 1.0 s'
+        graph.wait_until(lambda: len(canceled) == 2, 10.0, 'the cancels at the server')
+        assert sorted(canceled) == [0.25, 0.5]                  # both goals canceled

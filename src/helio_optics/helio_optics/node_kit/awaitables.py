@@ -17,6 +17,11 @@ why the MultiThreadedExecutor of rclpy 7.1.6 is avoided). These helpers make the
 - ``FirstOf``: one Future that any callback may complete (the first result wins);
 - ``NextTurn``: run a callable at the executor's next turn, after the messages that are
   already waiting (a node-clock timeout that must not beat data queued behind a /clock);
+- ``await results_unless(node, handles, trouble, poll)``: accepted action goals' results,
+  unless `trouble()` names a reason first (a driver fallen silent: a killed action server
+  never answers), then the goals are canceled and GoalTrouble raised;
+- ``cancel_if_accepted``: a done-callback for a goal request given up on (it may still be
+  accepted, late);
 - ``await in_thread(node, function, *args)``: a long computation (a calibration's fit) on a
   thread of its own, its result (or exception) handed back by a guard condition, so the
   executor serves heartbeats, leases and topics meanwhile.
@@ -113,6 +118,40 @@ async def within(node, future, seconds, wall=False):
     finally:
         node.destroy_timer(timer)
     return future.done()
+
+
+class GoalTrouble(Exception):
+    """An action goal's result given up on: what `result_unless`'s `trouble()` said."""
+
+
+def cancel_if_accepted(sent):
+    """Cancel the goal of a send_goal_async future that completed after it was given up on."""
+    handle = sent.result() if sent.done() and sent.exception() is None else None
+    if handle is not None and handle.accepted:
+        handle.cancel_goal_async()
+
+
+async def results_unless(node, handles, trouble, poll=0.1):
+    """
+    Return the result responses of the accepted goals `handles`, unless trouble comes first.
+
+    Every result is asked for at once (a result asked for only after another goal ended can
+    find its goal expired on the server). `trouble()` is asked every `poll` seconds of wall
+    time while a result is awaited; a non-empty answer (why a result will not come: its
+    server's driver fell silent, a device fault) cancels the goals not done and raises
+    GoalTrouble with it. A killed action server stays discovered for seconds and answers
+    nothing, so a bare await would wait forever.
+    """
+    results = [handle.get_result_async() for handle in handles]
+    for result in results:
+        while not await within(node, result, poll, wall=True):
+            why = trouble()
+            if why:
+                for handle, other in zip(handles, results):
+                    if not other.done():
+                        handle.cancel_goal_async()
+                raise GoalTrouble(why)
+    return [result.result() for result in results]
 
 
 async def discovered(node, ready, timeout, what):
