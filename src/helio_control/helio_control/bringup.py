@@ -89,6 +89,8 @@ CONTROLLER_NODES = (
     NodeSpec('helio_control', 'painter', 'painter.yaml'),
 )
 SIMULATED_NODES = WORLD_NODES + DRIVER_NODES + CONTROLLER_NODES
+# the nodes that read calibrations back from their calibration_dir at start
+CALIBRATED_NODES = ('spot_detector', 'lens_planner', 'painter')
 HARDWARE_NODES = DRIVER_NODES + CONTROLLER_NODES
 
 
@@ -143,11 +145,13 @@ def simulated_graph(port_dir, nodes=None, overrides=None):
             'silence_timeout': SIMULATED_SILENCE_TIMEOUT,
             'reconnect_max': SIMULATED_RECONNECT_MAX}
     # the simulated rig's calibrations stay with its graph: never in the real rig's directory
-    # (~/.helio/calibration), which the lens planner reads back at start (issue 30)
+    # (~/.helio/calibration), which the lens planner, the painter and the spot detector read
+    # back at start (issue 30)
+    calibrations = {'calibration_dir': os.path.join(port_dir, 'calibration')}
     wiring = {'sim_world': {'dobot_port': dobot_port, 'servo_port': servo_port},
               'dobot_driver': {'port': dobot_port, **link},
               'servo_driver': {'port': servo_port, **link},
-              'lens_planner': {'calibration_dir': os.path.join(port_dir, 'calibration')}}
+              **{node: dict(calibrations) for node in CALIBRATED_NODES}}
     return _select(SIMULATED_NODES, 'simulated', wiring, nodes, overrides)
 
 

@@ -71,9 +71,6 @@ def load_calibration(directory, name, description):
     return values, record
 
 
-DEFAULT_DIRECTORY = '~/.helio/calibration'
-
-
 def list_calibrations(directory, description):
     """
     Return one dict per calibration file of `directory`: what each calibration is.

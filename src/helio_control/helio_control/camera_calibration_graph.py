@@ -21,17 +21,16 @@ rig, the simulated graph's own directory in simulation) unless one is given.
 
 from dataclasses import dataclass
 import math
-import os
 import threading
 
-from helio_control.calibration_store import (CalibrationRefused, DEFAULT_DIRECTORY,
-                                             load_calibration, rig_description)
+from helio_control.calibration_store import (CalibrationRefused, load_calibration,
+                                             rig_description)
 from helio_control.camera_calibration_run import (calibrate_camera, plan_views,
                                                   save_camera_calibration)
 from helio_optics.geometry import PinholeCamera
 from helio_optics.node_kit import topics
 from helio_optics.node_kit.conversions import camera_from_info, image_to_numpy
-from helio_optics.node_kit.deployment import rig_file_or_default
+from helio_optics.node_kit.deployment import calibration_dir_or_default, rig_file_or_default
 from helio_optics.rig_kinematics import load_rig_parameters, Rig
 
 
@@ -159,8 +158,7 @@ def calibrate_on_graph(graph, spec, centre, yaw=0.0, views=25, calibration_dir=N
     """
     asked = {} if calibration_dir and rig_file else planner_parameters(
         graph, ('calibration_dir', 'rig_file'))
-    directory = os.path.expanduser(calibration_dir or asked.get('calibration_dir')
-                                   or DEFAULT_DIRECTORY)
+    directory = calibration_dir_or_default(calibration_dir or asked.get('calibration_dir'))
     rig_file = rig_file_or_default(rig_file or asked.get('rig_file') or '')
     planning, where = rig_with_saved_world(rig_file, directory)
     device = graph_rig or GraphRig(graph)

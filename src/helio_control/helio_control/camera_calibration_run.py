@@ -25,11 +25,10 @@ import datetime
 import os
 
 from helio_control.camera_views import plan_camera_views, view_candidates
+from helio_optics.node_kit.deployment import calibration_dir_or_default, RGB_CAMERA_INFO_FILE
 from helio_perception.camera_calibration import (BoardNotSeen, BoardView, calibrate,
                                                  detect_board, evenly_lit, write_camera_info)
 import numpy as np
-
-CAMERA_INFO_FILE = os.path.join('camera_info', 'rgb.yaml')    # in the calibration directory
 
 
 @dataclass
@@ -156,7 +155,7 @@ def calibrate_camera(plan, move, grab, spec, size, guess=None, frames=2, still_t
 
 def save_camera_calibration(directory, run, spec, camera_name):
     """Write the run's camera_info file into calibration `directory`; return its path."""
-    path = os.path.join(os.path.expanduser(directory), CAMERA_INFO_FILE)
+    path = os.path.join(calibration_dir_or_default(directory), RGB_CAMERA_INFO_FILE)
     os.makedirs(os.path.dirname(path), exist_ok=True)
     calibration = run.calibration
     when = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec='seconds')
@@ -173,5 +172,5 @@ def save_camera_calibration(directory, run, spec, camera_name):
     return write_camera_info(path, calibration.camera, camera_name, comments)
 
 
-__all__ = ['average_views', 'calibrate_camera', 'CAMERA_INFO_FILE', 'CameraCalibrationRun',
+__all__ = ['average_views', 'calibrate_camera', 'CameraCalibrationRun',
            'collect', 'corner_shift', 'plan_views', 'save_camera_calibration', 'still_view']

@@ -1039,10 +1039,10 @@ def add_sky_parser(commands):
 
 def command_calibrations(arguments):
     """List the saved calibrations: what, when, residuals, and whether this rig uses them."""
-    from helio_control.calibration_store import (
-        DEFAULT_DIRECTORY, list_calibrations, rig_description)
+    from helio_control.calibration_store import list_calibrations, rig_description
+    from helio_optics.node_kit.deployment import calibration_dir_or_default
     from helio_optics.node_kit.deployment import rig_file_or_default
-    directory = os.path.expanduser(arguments.dir or DEFAULT_DIRECTORY)
+    directory = calibration_dir_or_default(arguments.dir)
     rig_file = rig_file_or_default(arguments.rig or '')
     description = rig_description(rig_file)
     entries = list_calibrations(directory, description)

@@ -272,7 +272,8 @@ def check_camera_info(kind, matrices, window):
     if kind == 'rgb':      # the rig calibrates it over a printed board (issue 29, item 5)
         fix = ('helio calibrate camera (the rig moves the camera over a ChArUco board printed '
                'with helio print board), then give its driver the file (usb_cam: '
-               'camera_info_url) or spot_detector (camera_info_file)')
+               'camera_info_url), or restart spot_detector: it reads the file from its '
+               'calibration_dir while the camera_info is uncalibrated')
     else:
         fix = (f'calibrate the {kind} camera (ros2 run camera_calibration cameracalibrator, a '
                'checkerboard) and give its driver the result (usb_cam: camera_info_url)')

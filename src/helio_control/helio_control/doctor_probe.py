@@ -18,7 +18,7 @@ import subprocess
 import threading
 import time
 
-from helio_control.calibration_store import DEFAULT_DIRECTORY, list_calibrations
+from helio_control.calibration_store import list_calibrations
 from helio_control.calibration_store import rig_description
 from helio_control.doctor import (
     CalibrationFacts, ClockFacts, DeviceFacts, Facts, SpotFacts, StreamFacts, ThermalFacts)
@@ -108,7 +108,7 @@ def gather(namespace='', window=3.0, calibration_dir=None, site_file=None, disco
     from helio_msgs.msg import DeviceStatus, SpotObservation, ThermalStats
     from helio_optics.config_files import config_path
     from helio_optics.node_kit import emergency_stop
-    from helio_optics.node_kit.deployment import rig_file_or_default
+    from helio_optics.node_kit.deployment import calibration_dir_or_default, rig_file_or_default
     from helio_optics.node_kit.in_process_graph import GraphTimeout, InProcessGraph
     from helio_optics.node_kit.in_process_graph import TRANSIENT_LOCAL_QOS
     from rcl_interfaces.srv import GetParameters
@@ -220,11 +220,10 @@ def gather(namespace='', window=3.0, calibration_dir=None, site_file=None, disco
     if calibration_dir:
         directory, source = calibration_dir, '--calibration-dir'
     elif 'calibration_dir' in planner:
-        directory, source = planner['calibration_dir'] or DEFAULT_DIRECTORY, \
-            'lens_planner.calibration_dir'
+        directory, source = planner['calibration_dir'], 'lens_planner.calibration_dir'
     else:
-        directory, source = DEFAULT_DIRECTORY, 'the default: lens_planner did not answer'
-    directory = os.path.expanduser(directory)
+        directory, source = '', 'the default: lens_planner did not answer'
+    directory = calibration_dir_or_default(directory)
     rig_file = rig_file_or_default(planner.get('rig_file') or '')
     description = rig_description(rig_file)
     facts.calibration = CalibrationFacts(directory, source, description, rig_file,

@@ -13,12 +13,12 @@ whose painter runs on this machine).
 
 import os
 
-from helio_control.calibration_store import DEFAULT_DIRECTORY, rig_description
+from helio_control.calibration_store import rig_description
 from helio_control.camera_calibration_graph import node_parameters
 from helio_control.dot_size_calibration import (calibration_row, fit_dot_size,
                                                 samples_from_journal, save_dot_calibration)
 from helio_control.run_journal import read_journal
-from helio_optics.node_kit.deployment import rig_file_or_default
+from helio_optics.node_kit.deployment import calibration_dir_or_default, rig_file_or_default
 
 
 def paint_goal(goal_type, test, run_dir):
@@ -44,8 +44,7 @@ def calibrate_dots_on_graph(graph, client, goal_type, out_dir, goals=None,
     Raises ``dot_size_calibration.DotCalibrationError`` when the dots cannot be fitted.
     """
     asked = node_parameters(graph, 'painter', ('calibration_dir', 'rig_file'))
-    directory = os.path.expanduser(calibration_dir or asked.get('calibration_dir')
-                                   or DEFAULT_DIRECTORY)
+    directory = calibration_dir_or_default(calibration_dir or asked.get('calibration_dir'))
     rig_file = rig_file_or_default(asked.get('rig_file') or '')
     samples, messages = [], []
     for test in goals or calibration_row():

@@ -12,7 +12,7 @@ No rclpy import: it takes the node.
 import os
 
 from helio_control.procedures.painter_port import COOLING_RULES, PainterSettings
-from helio_optics.node_kit.deployment import declare_site
+from helio_optics.node_kit.deployment import declare_calibration_dir, declare_site
 from helio_optics.node_kit.parameters import declare
 from helio_perception.ground_plane import RESPONSES
 
@@ -175,10 +175,8 @@ def declare_painter_parameters(node):
             node, 'verify.camera_response', 'srgb',
             "The RGB camera's tone curve, undone before char is measured.",
             choices=RESPONSES),
-        calibration_dir=declare(
-            node, 'calibration_dir', '', 'Where calibrations are read (empty: ~/.helio/'
-            'calibration); its dots.yaml (helio calibrate dots) is read at each goal.') or
-        '~/.helio/calibration',
+        calibration_dir=declare_calibration_dir(
+            node, 'its dots.yaml (helio calibrate dots) is read at start and at each goal'),
         sun_max_sigma=declare(
             node, 'sun_max_sigma', 0.2,
             'A sun estimate on sun/estimate is used when the larger standard deviation of '

@@ -47,3 +47,19 @@ def test_a_node_takes_a_rig_calibration_and_refuses_a_malformed_one():
         graph.wait_until(lambda: len(updates) == 2, 10.0, 'the world calibration')
         assert rig.parameters.world_yaw == pytest.approx(math.pi / 2)
         assert rig.parameters.lens_offset == pytest.approx((0.002, 0.0, 0.0))
+
+
+def test_the_camera_info_file_is_the_named_one_else_the_calibration_directorys(tmp_path):
+    from helio_optics.node_kit.deployment import camera_info_file_or_default
+    from helio_optics.node_kit.deployment import calibration_dir_or_default, RGB_CAMERA_INFO_FILE
+    import os
+    directory = str(tmp_path)
+    assert camera_info_file_or_default('', directory) == ''          # nothing saved: none
+    saved = tmp_path / RGB_CAMERA_INFO_FILE
+    saved.parent.mkdir(parents=True)
+    saved.write_text('image_width: 640\n')
+    assert camera_info_file_or_default('', directory) == str(saved)  # helio calibrate camera's
+    assert camera_info_file_or_default('none', directory) == ''      # asked for none
+    assert camera_info_file_or_default('/etc/cam.yaml', directory) == '/etc/cam.yaml'
+    assert calibration_dir_or_default('') == os.path.expanduser('~/.helio/calibration')
+    assert calibration_dir_or_default('~/rig') == os.path.expanduser('~/rig')

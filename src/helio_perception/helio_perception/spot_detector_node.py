@@ -28,8 +28,9 @@ from helio_optics.geometry import invert_transform, quaternion_from_matrix
 from helio_optics.node_kit import topics
 from helio_optics.node_kit.conversions import camera_from_info, image_to_numpy
 from helio_optics.node_kit.conversions import ImageConversionError, stamp_to_seconds
-from helio_optics.node_kit.deployment import declare_lens, declare_rig
-from helio_optics.node_kit.deployment import follow_world_calibration
+from helio_optics.node_kit.deployment import camera_info_file_or_default
+from helio_optics.node_kit.deployment import declare_calibration_dir, declare_lens, declare_rig
+from helio_optics.node_kit.deployment import follow_world_calibration, RGB_CAMERA_INFO_FILE
 from helio_optics.node_kit.diagnostics import diagnostic_array, OK
 from helio_optics.node_kit.joint_states import CAMERA_NODE_JOINT_STATE_DEPTH, JointStateBuffer
 from helio_optics.node_kit.parameters import declare, declare_joint_lookup
@@ -227,13 +228,19 @@ class SpotDetectorNode(Node):
                                           'wall time [s].', 0.0, 3600.0)
         self.freshness = InputFreshness.declared(self, topics.RGB_IMAGE, time.monotonic())
 
+        calibration_dir = declare_calibration_dir(
+            self, f'its {RGB_CAMERA_INFO_FILE} (helio calibrate camera) is the camera_info '
+            'file when camera_info_file is empty')
         self.camera_info_file = declare(
             self, 'camera_info_file', '',
             'A camera_info YAML (camera_calibration_parsers\' format, as "helio calibrate '
             'camera" writes it) used while rgb/camera_info is uncalibrated (K all zero, as '
             'usb_cam sends without a calibration file); a file for another image size than '
             "rgb/camera_info's is refused with the reason. A calibrated rgb/camera_info is "
-            "used as it comes ('': no file).")
+            f"used as it comes ('': calibration_dir's {RGB_CAMERA_INFO_FILE} if there is "
+            "one; 'none': no file).")
+        self.camera_info_file = camera_info_file_or_default(self.camera_info_file,
+                                                            calibration_dir)
         self.stats = FrameStatistics()
         self.joints = JointStateBuffer()
         self.camera = None
@@ -260,7 +267,9 @@ class SpotDetectorNode(Node):
         self.get_logger().info(
             f'spot_detector: marker {marker.dictionary} id {marker.marker_id} side '
             f'{marker.side} m, threshold {spot.threshold_mode}, features in '
-            f"{'optics (from /joint_states)' if self.features_in_optics else 'world'} frame")
+            f"{'optics (from /joint_states)' if self.features_in_optics else 'world'} frame; "
+            + (f'camera_info file {self.camera_info_file} while rgb/camera_info is '
+               'uncalibrated' if self.camera_info_file else 'no camera_info file'))
 
     def _calibrated(self, _rig):
         self.world_calibrated = True

@@ -6,9 +6,15 @@ T_robot_world) declares ``rig_file``; one that traces the lens declares ``lens_f
 that needs the sun's ephemeris declares ``site_file``. Each is a ROS 2 parameter file with a
 ``rig``, ``lens`` or ``site`` section; empty means the workspace's ``config/rig.yaml``,
 ``config/lens.yaml`` or ``config/site.yaml`` (found by ``helio_optics.config_files``).
+
+What the rig's calibrations measured lives in one directory (issue 30), declared by every
+node that reads or writes one as ``calibration_dir`` (``declare_calibration_dir``; empty:
+``~/.helio/calibration``): the robot-world, rig-build and focal calibrations (lens
+planner), the dot-size one (painter) and the RGB camera's camera_info file (spot detector).
 """
 
 import math
+import os
 
 from geometry_msgs.msg import PoseStamped
 from helio_optics.config_files import config_path
@@ -24,6 +30,36 @@ RIG_CALIBRATION_TOPIC = 'calibration/rig'
 RIG_FILE_PARAMETER = 'rig_file'
 LENS_FILE_PARAMETER = 'lens_file'
 SITE_FILE_PARAMETER = 'site_file'
+DEFAULT_CALIBRATION_DIR = '~/.helio/calibration'
+# the RGB camera's camera_info file in the calibration directory (helio calibrate camera)
+RGB_CAMERA_INFO_FILE = os.path.join('camera_info', 'rgb.yaml')
+
+
+def calibration_dir_or_default(path):
+    """Return the calibration directory `path` (user-expanded), or the default when empty."""
+    return os.path.expanduser(path or DEFAULT_CALIBRATION_DIR)
+
+
+def camera_info_file_or_default(path, calibration_dir):
+    """
+    Return the RGB camera_info file a node uses ('' for none).
+
+    `path` itself; when empty, the calibration directory's RGB_CAMERA_INFO_FILE if it exists
+    (else none); 'none': none.
+    """
+    if path == 'none':
+        return ''
+    if path:
+        return os.path.expanduser(path)
+    saved = os.path.join(calibration_dir, RGB_CAMERA_INFO_FILE)
+    return saved if os.path.isfile(saved) else ''
+
+
+def declare_calibration_dir(node, reads):
+    """Declare ``calibration_dir`` on `node`, saying what it `reads`; return the directory."""
+    return calibration_dir_or_default(declare(
+        node, 'calibration_dir', '',
+        f'The calibration directory (empty: {DEFAULT_CALIBRATION_DIR}): {reads}.'))
 
 
 def deployment_file_or_default(path, default_name, parameter):
