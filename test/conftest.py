@@ -33,6 +33,8 @@ def graph_of_processes(tmp_path, nodes, overrides=None, namespace='',
     # it asks for it: the calibration costs a minute of rig time per graph
     overrides = {node: dict(values) for node, values in (overrides or {}).items()}
     overrides.setdefault('painter', {}).setdefault('calibrate_rig', 'never')
+    # nor the dot-size test row (issue 29): a test that wants it sets calibrate_dots
+    overrides['painter'].setdefault('calibrate_dots', 'never')
     specs = simulated_graph(str(tmp_path / 'ports'), nodes, overrides)
 
     def on_death(process):

@@ -64,7 +64,6 @@ from helio_control.bringup import node_environment
 from helio_control.calibration_store import rig_description
 from helio_control.dot_check import expected_dot
 from helio_control.dot_size_calibration import calibration_row, load_dot_calibration
-from helio_control.dot_size_calibration_graph import calibrate_dots_on_graph
 from helio_control.plan import Plan
 from helio_control.recorder import Recorder
 from helio_control.run_journal import read_journal
@@ -124,6 +123,16 @@ class Painting:
         settings = SimSettings()
         self.origin = (settings.panel_extent[0], settings.panel_extent[2])
         self.cell = settings.grid.fine_cell
+        self.painter = None             # the painter's parameter client, once asked
+
+    def set_painter(self, **values):
+        """Set painter parameters at run time (the DYNAMIC ones); fail on a refusal."""
+        if self.painter is None:
+            self.painter = AsyncParameterClient(self.graph.helper, 'painter')
+        self.graph.wait_until(self.painter.services_are_ready, 60.0, 'painter parameters')
+        response = self.graph.on_executor(lambda: self.painter.set_parameters(
+            [Parameter(k, value=v) for k, v in values.items()]), 60.0, 'the response')
+        assert all(r.successful for r in response.results), response.results
 
     def paint(self, name, **goal_fields):
         """Run a PaintPattern goal in run_root/name; return (result, its journal's dots)."""
@@ -156,7 +165,10 @@ def painting_graph(tmp_path):
     overrides = {'sim_world': {'real_time_factor': 6.0, 'flux_rays': 20000,
                                'canvas_rate': 1.0, 'pace_max_lag': 0.0},
                  'lens_planner': {'calibration_dir': str(tmp_path / 'calibration')},
-                 'painter': {'calibration_dir': str(tmp_path / 'calibration')}}
+                 'painter': {'calibration_dir': str(tmp_path / 'calibration'),
+                             # the sized-dots test's row: one dot per target
+                             'dot_calibration.n_p_targets': list(SIZED_TARGETS),
+                             'dot_calibration.per_target': 1}}
     # the module's last test kills the servo driver
     with graph_of_processes(tmp_path, NODES, overrides, may_die=('servo_driver',)) \
             as (group, graph):
@@ -305,14 +317,7 @@ def test_a_sample_word_is_painted_with_every_dot_charred_on_target_and_even(pain
 def test_each_dot_verdict_agrees_with_the_worlds_char_map(painting):
     # issue 29 item 4: each dot made to fail on purpose but the first (module docstring)
     rig = Rig(painting.group, painting.graph, painting.run_root)
-    painter = AsyncParameterClient(painting.graph.helper, 'painter')
-
-    def set_painter(**values):
-        painting.graph.wait_until(painter.services_are_ready, 60.0, 'painter parameters')
-        response = painting.graph.on_executor(lambda: painter.set_parameters(
-            [Parameter(k, value=v) for k, v in values.items()]), 60.0, 'the response')
-        assert all(r.successful for r in response.results), response.results
-
+    set_painter = painting.set_painter
     on_feedback, heating = rig.heating(index=1, n_p=5)
     (x_cloud, y), (x_brief, _), (x_small, _) = VERIFY_DOTS
     handle = rig.send(dots_along(y, 2, x=x_cloud), 'verify_cloud', on_feedback=on_feedback)
@@ -439,35 +444,33 @@ def test_the_view_bridge_streams_the_painting_and_leaves_its_timing_alone(painti
     assert layout_topics() <= set(reader.channels)
 
 
-def test_a_calibrated_painter_burns_dots_as_wide_as_asked(painting):
-    # issue 29 item 3: helio calibrate dots's procedure (dot_size_calibration_graph), a row of
-    # test dots on the margin above the canvas at three N_p targets, burnt by the painter and
-    # measured by its RGB camera, the fit saved as dots.yaml in the painter's calibration
-    # directory; then two dots asked 1.65 mm wide (about N_p 24): the world's char map must hold
-    # them within 10 % of it. The file is removed after: the module's other paintings burn to
-    # the paper's N_p
+def test_a_painter_burns_its_test_row_first_then_dots_as_wide_as_asked(painting):
+    # issue 29 item 3: with calibrate_dots 'missing' and no dots.yaml, the painting first
+    # burns the test row (dot_size_run) on the margin above the canvas, one dot at each of
+    # three N_p targets, measures each with its RGB camera, fits the law and saves dots.yaml
+    # in its calibration directory; then its two dots, asked 1.65 mm wide (about N_p 24),
+    # are planned from that law: the world's char map must hold them within 10 % of it.
+    # The file is removed after: the module's other paintings burn to the paper's N_p
     calibration_dir = painting.calibration_dir
     goals = calibration_row(SIZED_TARGETS, per_target=1)
+    row = [Point(x=x, y=y) for goal in goals for x, y in goal.points]
+    description = rig_description(rig_file_or_default(''))
+    assert load_dot_calibration(calibration_dir, description) is None
+    painting.set_painter(calibrate_dots='missing')
     try:
-        calibration, samples, path, messages = calibrate_dots_on_graph(
-            painting.graph, painting.client, PaintPattern.Goal,
-            str(painting.run_root / 'calibrate_dots'), goals, timeout=TIMEOUT, progress=print)
-        print('\n'.join(messages + calibration.summary()))
-        for sample in samples:
-            print(f'test dot N_p {sample.n_p_target}: camera {sample.diameter * 1e3:.2f} mm, '
-                  f'{sample.dwell:.1f} s')
-        assert len(samples) == 3 and path == os.path.join(calibration_dir, 'dots.yaml')
-        assert load_dot_calibration(calibration_dir, rig_description(
-            rig_file_or_default(''))) == calibration
-        # the test dots where they were asked, in the world's char map
-        row = [Point(x=x, y=y) for goal in goals for x, y in goal.points]
+        targets = [Point(x=x, y=y, z=0.0) for x, y in SIZED_DOTS]
+        result, dots = painting.paint('sized', points=targets, dot_radius=SIZED_WIDTH)
+        calibration = load_dot_calibration(calibration_dir, description)
+        assert calibration is not None, result.message
+        print('\n'.join(calibration.summary()))
+        assert 'dot-size calibration from 3 test dots' in result.message, result.message
+        # the test dots where the row puts them, in the world's char map
         tested = dots_at(painting.charred_dots(), row)
         print('test dots in the char map: ' + ', '.join(
             f'{dot.diameter * 1e3:.2f} mm' if dot else 'none' for dot in tested))
         assert all(dot is not None for dot in tested)
-        targets = [Point(x=x, y=y, z=0.0) for x, y in SIZED_DOTS]
-        result, dots = painting.paint('sized', points=targets, dot_radius=SIZED_WIDTH)
     finally:
+        painting.set_painter(calibrate_dots='never')
         if os.path.exists(os.path.join(calibration_dir, 'dots.yaml')):
             os.remove(os.path.join(calibration_dir, 'dots.yaml'))
     assert result.success, result.message

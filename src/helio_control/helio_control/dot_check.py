@@ -19,6 +19,16 @@ import numpy as np
 # targets within this many expected diameters of a dot are its neighbours
 NEIGHBOUR_REACH = 2.5
 PAPER_N_P = 30.0     # the paper's N_p target of a dot r_p wide
+PAPER_PITCH = 0.002  # [m] the paper's r_p: "a charred dot ~0.2 cm wide" at N_p 30
+
+
+def guessed_diameter(n_p, pitch=PAPER_PITCH):
+    """
+    Return the expected burnt diameter [m] of a dot of N_p target `n_p`, uncalibrated.
+
+    The plan's dot pitch `pitch` [m] scaled by the square root of n_p over the paper's 30.
+    """
+    return float(pitch) * math.sqrt(max(float(n_p), 1.0) / PAPER_N_P)
 
 
 def expected_dot(plan, index):
@@ -28,8 +38,7 @@ def expected_dot(plan, index):
     if parameters.get('dot_size'):
         expected = float(DotSizeCalibration.from_parameters(parameters['dot_size']).diameter(n_p))
     else:
-        pitch = float(parameters.get('dot_radius') or 0.002)
-        expected = pitch * math.sqrt(n_p / PAPER_N_P)
+        expected = guessed_diameter(n_p, float(parameters.get('dot_radius') or PAPER_PITCH))
     dots = np.asarray(plan.dots, dtype=float).reshape(-1, 2)
     distance = np.hypot(*(dots - dots[index]).T)
     near = (distance <= NEIGHBOUR_REACH * expected) & (np.arange(len(dots)) != index)

@@ -264,10 +264,12 @@ class PainterNode(Node, PainterRigPort):
                 waiter.offer(message)
 
     def _on_parameters_set(self, parameters):
-        """Take the parameters set at run time (``max_heating``, ``verify.*``)."""
+        """Take the parameters set at run time (``DYNAMIC``: from the next use on)."""
         for parameter in parameters:
             if parameter.name in DYNAMIC:
-                setattr(self.settings, DYNAMIC[parameter.name], float(parameter.value))
+                name = DYNAMIC[parameter.name]
+                setattr(self.settings, name,
+                        type(getattr(self.settings, name))(parameter.value))
 
     def _on_rgb_info(self, message):
         key = (tuple(message.k), tuple(message.d), message.width, message.height)

@@ -11,6 +11,7 @@ No rclpy import: it takes the node.
 
 import os
 
+from helio_control.procedures.dot_size_run import CALIBRATE_DOTS, DotRowSettings
 from helio_control.procedures.painter_port import COOLING_RULES, PainterSettings
 from helio_optics.node_kit.deployment import declare_calibration_dir, declare_site
 from helio_optics.node_kit.parameters import declare
@@ -18,7 +19,8 @@ from helio_perception.ground_plane import RESPONSES
 
 # The parameters set at run time, by name, and the PainterSettings field each one sets.
 DYNAMIC = {'max_heating': 'max_heating',
-           'verify.min_diameter_ratio': 'verify_min_diameter_ratio'}
+           'verify.min_diameter_ratio': 'verify_min_diameter_ratio',
+           'calibrate_dots': 'calibrate_dots'}
 
 
 def declare_painter_parameters(node):
@@ -190,5 +192,24 @@ def declare_painter_parameters(node):
             node, 'heartbeat_period', 0.05,
             "Period of painter/heartbeat, the lens planner's focus lease, on the node clock "
             'and on the wall clock [s].', 0.01, 1.0))
+    settings.calibrate_dots = declare(
+        node, 'calibrate_dots', 'never',
+        "The dot-size test row before a painting (issue 29): 'missing' (no dots.yaml for "
+        "this rig in calibration_dir yet), 'always', or 'never' (helio calibrate dots "
+        "only). With a calibration a goal's dot_radius is the burnt dot's width. Set at run "
+        'time: from the next goal on.', choices=CALIBRATE_DOTS, dynamic=True)
+    defaults = DotRowSettings()
+    settings.dot_row = DotRowSettings(
+        n_p_targets=tuple(declare(
+            node, 'dot_calibration.n_p_targets', list(defaults.n_p_targets),
+            'N_p targets of the test row, one group of dots each [-].')),
+        per_target=declare(node, 'dot_calibration.per_target', defaults.per_target,
+                           'Test dots per N_p target [-].', 1, 10),
+        start=tuple(declare(
+            node, 'dot_calibration.start', list(defaults.start),
+            "The test row's first dot, world x and y, on the panel's margin outside the "
+            'canvases painted [m].')),
+        pitch=declare(node, 'dot_calibration.pitch', defaults.pitch,
+                      'Spacing of the test dots along world +x [m].', 0.002, 0.05))
     settings.runs_dir = os.path.abspath(os.path.expanduser(settings.runs_dir))
     return settings

@@ -151,6 +151,17 @@ def test_non_finite_numbers_are_refused_at_start_and_at_run_time_by_name(make_no
     assert node.set_parameters([Parameter('bias', value=0.5)])[0].successful
 
 
+def test_a_dynamic_choice_outside_its_choices_is_refused_at_run_time_by_name(make_node):
+    node = make_node()
+    assert declare(node, 'rule', 'never', 'when to do it', choices=('missing', 'never'),
+                   dynamic=True) == 'never'
+    refused = node.set_parameters([Parameter('rule', value='sometimes')])[0]
+    assert not refused.successful
+    assert "rule must be one of ('missing', 'never'), got 'sometimes'" in refused.reason
+    assert node.get_parameter('rule').value == 'never'
+    assert node.set_parameters([Parameter('rule', value='missing')])[0].successful
+
+
 @pytest.mark.parametrize('name, problem', [
     ('timeout_s', "use 'timeout'"), ('joint_state_rate_hz', "use 'joint_state_rate'"),
     ('site.elevation_m', "use 'site.elevation'"), ('lens.offset_rad', "use 'lens.offset'"),

@@ -78,6 +78,8 @@ class PainterSettings:
     heartbeat_period: float
     site: object = None          # helio_optics.ephemeris.Site of the deployment
     rig_file: str = ''           # the rig file the node read (the dot-size calibration's)
+    calibrate_dots: str = 'never'   # the dot-size test row before a painting (dot_size_run)
+    dot_row: object = None       # dot_size_run.DotRowSettings of that row (None: defaults)
 
 
 @dataclass

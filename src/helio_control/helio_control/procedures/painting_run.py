@@ -11,8 +11,11 @@ Per goal (paper Sec. IV-B and IV-C, Algorithm 1):
    the default until it places as well as the paper), else the robot-world calibration
    (``calibrate_world``; once per node, or every goal, by parameter); without a sun
    estimate, the sun sweep (``sweep_sun``): lines 1-2;
-3. the plan (``helio_control.plan``): the picture (or the goal's points) to ordered world
-   dots with per-dot N_p targets, checked against the rig's reach for the estimated sun;
+3. the dot-size test row (``dot_size_run``, issue 29) when ``calibrate_dots`` asks for it
+   (``missing``: no ``dots.yaml`` for this rig yet); then the plan (``helio_control.plan``):
+   the picture (or the goal's points) to ordered world dots with per-dot N_p targets (for
+   the width asked, with the calibration), checked against the rig's reach for the
+   estimated sun;
 4. per dot, Algorithm 1 lines 6-14 (``helio_control.procedures.dot_procedure``); the sun estimate
    follows the sun by Eq 18 (``sun_estimator`` republishes it).
 
@@ -45,10 +48,12 @@ import traceback
 
 from helio_control import sky
 from helio_control.dot_check import expected_dot
-from helio_control.dot_size_calibration import dot_size_for_painting, options_for_dot_size
+from helio_control.dot_size_calibration import calibration_row, dot_size_for_painting
+from helio_control.dot_size_calibration import options_for_dot_size
 from helio_control.picture_input import picture_from_image_msg, PictureError
 from helio_control.plan import options_from_goal, Plan, plan_dots, plan_picture
 from helio_control.plan import PlanError, PlanOptionsError
+from helio_control.procedures import dot_size_run
 from helio_control.procedures.dot_procedure import DotProcedure
 from helio_control.procedures.painter_port import COOLING_RULES, PaintCanceled, PaintFailed
 from helio_control.procedures.painter_port import PaintFeedback, PaintResult
@@ -92,6 +97,7 @@ class PaintingRun:
         self.dot = DotProcedure(port, settings)
         self.world_calibrated = False
         self._journal = None             # the running goal's JournalWriter
+        self.dot_calibration_note = ''   # what the test row before the goal's plan gave
 
     async def execute(self, goal):
         """
@@ -232,9 +238,36 @@ class PaintingRun:
         except (PictureError, PlanError, PlanOptionsError, ValueError) as error:
             raise PaintFailed(f'cannot plan the painting: {error}') from None
 
-    def _plan_or_resume(self, goal, key):
+    async def _burn_test_row(self, goal, feedback):
+        """Burn the dot-size test row first when asked (dot_size_run); return a note or ''."""
+        port, settings = self.port, self.settings
+        present, refused = dot_size_for_painting(settings.calibration_dir, settings.rig_file)
+        if not dot_size_run.needs_test_row(settings.calibrate_dots, present is not None,
+                                           goal.dry_run):
+            return ''
+        options = options_from_goal(goal)
+        row_settings = settings.dot_row or dot_size_run.DotRowSettings()
+        row = calibration_row(tuple(row_settings.n_p_targets), row_settings.per_target,
+                              tuple(row_settings.start), row_settings.pitch)
+        conflict = dot_size_run.row_conflict(
+            row, None if goal.points else dot_size_run.canvas_of(options),
+            [[p.x, p.y] for p in goal.points],
+            dot_size_run.clearance_of(row_settings.pitch, options.dot_radius))
+        if conflict:
+            note = f'dot-size calibration not made: {conflict}'
+            port.get_logger().warning(note)
+            return note
+        port.get_logger().info('burning the dot-size test row first (calibrate_dots '
+                               f'{settings.calibrate_dots}' + (f'; {refused}' if refused
+                                                               else '') + ')')
+        calibration, note = await dot_size_run.burn_test_row(
+            self.dot, feedback, settings, row_settings, port.get_logger().info)
+        if calibration is None:
+            port.get_logger().warning(note)
+        return note
+
+    def _plan_or_resume(self, goal, resumed):
         """Return (plan, the dots burnt before, the run resumed or '') of the goal."""
-        resumed = None if goal.fresh else unfinished_run(self.settings.runs_dir, key)
         if resumed is None:
             return self._make_plan(goal), set(), ''
         run_dir, burnt = resumed
@@ -254,7 +287,12 @@ class PaintingRun:
         self._refuse_what_the_sun_cannot_serve(goal)      # no sweep for a sun too low
         await self._prepare(feedback)
         self._refuse_what_the_sun_cannot_serve(goal)      # nor a canvas out of its reach
-        plan, burnt, resumed_from = self._plan_or_resume(goal, key)
+        resumed = None if goal.fresh else unfinished_run(settings.runs_dir, key)
+        self.dot_calibration_note = ''
+        if resumed is None:                               # a new plan: sized as measured
+            self.dot_calibration_note = await self._burn_test_row(goal, feedback)
+        plan, burnt, resumed_from = self._plan_or_resume(goal, resumed)
+        painted_from = port.now()                         # the dots' time, the estimate's
         run_dir = os.path.abspath(goal.run_dir) if goal.run_dir else os.path.join(
             settings.runs_dir, datetime.datetime.fromtimestamp(port.unix_now(), UTC).strftime(
                 '%Y%m%dT%H%M%SZ'))
@@ -304,7 +342,7 @@ class PaintingRun:
         port.publish_feedback(feedback)
         result.success = failed == 0
         result.message = self._summary(goal, result, plan, len(todo), failed,
-                                       port.now() - began)
+                                       port.now() - painted_from)
 
     def _summary(self, goal, result, plan, painted, failed, seconds):
         """Return the result message of a run that went through its `painted` dots."""
@@ -320,6 +358,8 @@ class PaintingRun:
                     f'the sun; run in {result.run_dir}')
         if plan.rejected:
             message += f'; {len(plan.rejected)} picture dots left out by the plan'
+        if self.dot_calibration_note:
+            message += f'; {self.dot_calibration_note}'
         if dot.thermal_interruptions:
             message += (f'; {dot.thermal_interruptions} heating(s) broken off by a stale '
                         'thermal stream and done again')

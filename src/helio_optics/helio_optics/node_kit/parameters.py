@@ -113,6 +113,8 @@ def declare(node, name, default, description, minimum=None, maximum=None, choice
         raise ValueError(problem)
     if dynamic:
         _refuse_non_finite_at_run_time(node)
+        if choices:
+            node._helio_choices[name] = tuple(choices)
     return value
 
 
@@ -129,14 +131,24 @@ def non_finite_problem(name, value):
 
 
 def _refuse_non_finite_at_run_time(node):
-    """Add, once per node, a set_parameters check that refuses NaN and infinities by name."""
+    """
+    Add, once per node, a set_parameters check that refuses bad values by name.
+
+    NaN and infinities; and for a dynamic parameter declared with `choices`, a string
+    outside them (``node._helio_choices``).
+    """
     if getattr(node, '_helio_non_finite_check', False):
         return
     from rcl_interfaces.msg import SetParametersResult
+    node._helio_choices = {}
 
     def check(parameters):
         for parameter in parameters:
             problem = non_finite_problem(parameter.name, parameter.value)
+            choices = node._helio_choices.get(parameter.name)
+            if not problem and choices and parameter.value not in choices:
+                problem = (f'parameter {parameter.name} must be one of {choices}, got '
+                           f'{parameter.value!r}')
             if problem:
                 return SetParametersResult(successful=False, reason=problem)
         return SetParametersResult(successful=True)
