@@ -291,13 +291,27 @@ def test_a_device_silent_mid_move_aborts_and_holds_the_servos_when_it_answers(wr
     assert target_us == pytest.approx(position_us, abs=0.25)
 
 
+@pytest.fixture
+def patient_wrist(clock):
+    """
+    Start the wrist with a heating guard of 1 s on both clocks (shipped: 0.15 s, 0.3 s).
+
+    The test's beats come from the test process, which a loaded machine can pause for more
+    than 0.3 s between two beats: the guard then rightly fired mid-beating (fresh run s46a).
+    """
+    emulator = MaestroEmulator(calibrations=[YAW, PITCH], clock=clock, **CONFIGURED)
+    with driver_on(emulator, wrist_graph(heating_guard_timeout=1.0,
+                                         heating_guard_timeout_wall=1.0)) as emulator_and_graph:
+        yield emulator_and_graph
+
+
 def test_the_lens_planner_silent_while_heating_turns_the_lens_off_the_sun_and_clear_does_not(
-        wrist):
+        patient_wrist):
     # issue 30: a lens planner that dies with the lens at the heating distance cannot
     # retreat it; its lens/heating beats stop without a 'clear', and the driver turns the
     # lens pitch emergency_turn (0.6 rad) off the sun by itself, within the guard's
-    # timeouts (0.15 s node clock and 0.3 s wall; no /clock here: both are the wall)
-    emulator, graph = wrist
+    # timeouts (here 1 s on both clocks; no /clock here: both are the wall)
+    emulator, graph = patient_wrist
     assert graph.run(MoveWrist.Goal(yaw=0.2, pitch=-0.2)).result.success
     beats = graph.helper.create_publisher(Header, 'lens/heating', 10)
 
@@ -320,6 +334,7 @@ def test_the_lens_planner_silent_while_heating_turns_the_lens_off_the_sun_and_cl
     silent_at = time.monotonic()
     graph.joint_states.wait_for_message(lambda m: abs(m.position[1] + 0.2) >= 0.59, 5.0)
     print(f'\nturned 0.6 rad {time.monotonic() - silent_at:.2f} s (wall) after the last beat')
+    assert time.monotonic() - silent_at >= 0.9      # not before the guard's 1 s
     assert graph.driver.heating_guard.armed is False
     assert graph.wait_status(lambda s: s.connected)
     assert graph.run(MoveWrist.Goal(yaw=0.0, pitch=0.0)).result.success
