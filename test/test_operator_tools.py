@@ -8,9 +8,11 @@ the launch entries.
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 
+from foxglove_ws import FoxgloveClient
 from helio_control.bringup import hardware_graph, node_entries, node_processes
 from helio_control.bringup import SIMULATED_DEVICE_REPLY_TIMEOUT, SIMULATED_RECONNECT_MAX
 from helio_control.bringup import simulated_graph
@@ -20,6 +22,7 @@ from helio_control.run_journal import JournalWriter
 from helio_msgs.action import PaintPattern
 import numpy as np
 import pytest
+from test_view_bridge import CHECKED, well_formed
 
 HELIO = [sys.executable, '-m', 'helio_control.cli']
 
@@ -154,15 +157,60 @@ def test_paint_with_no_graph_reachable_says_so_in_one_line_and_starts_no_simulat
     assert not (tmp_path / 'run' / 'logs').exists()          # no node process was started
 
 
+# the bridge's annotated channels, under the namespace of the graph helio paint starts
+VIEWED = ('/paint_test/view/scene', '/paint_test/view/rgb/annotations',
+          '/paint_test/view/thermal/annotations')
+
+
+def free_port():
+    """Return a TCP port free on localhost now (the kernel's pick)."""
+    with socket.socket() as probe:
+        probe.bind(('127.0.0.1', 0))
+        return probe.getsockname()[1]
+
+
 def test_paint_starts_the_simulated_graph_paints_reports_and_stops_all_of_it(tmp_path):
-    """No graph running: helio paint --sim starts the simulated one, paints two dots."""
+    """No graph running: helio paint --sim --view starts the simulated one, paints two dots."""
     targets = [(0.06, 0.06), (0.09, 0.07)]
-    done = helio('paint', '--sim', '--points', *[f'{x},{y}' for x, y in targets],
-                 '--start-timeout', '120', '--out', str(tmp_path / 'run'), '--namespace',
-                 '/paint_test', timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    assert 'Traceback' not in done.stderr
-    assert str(tmp_path / 'run' / 'report.html') in done.stdout + done.stderr
+    port = free_port()
+    out, err = tmp_path / 'stdout.txt', tmp_path / 'stderr.txt'     # files: never blocks
+    with open(out, 'w') as stdout, open(err, 'w') as stderr:
+        process = subprocess.Popen(
+            HELIO + ['paint', '--sim', '--points', *[f'{x},{y}' for x, y in targets],
+                     '--start-timeout', '120', '--out', str(tmp_path / 'run'), '--namespace',
+                     '/paint_test', '--view', '--view-port', str(port)],
+            stdout=stdout, stderr=stderr, text=True)
+    viewer = None
+    try:
+        # --view (issue 33): the live bridge serves the painting while it runs
+        def connected():
+            nonlocal viewer
+            assert process.poll() is None, err.read_text()[-3000:]
+            try:
+                viewer = FoxgloveClient(port, [f'/paint_test{topic}' for topic in CHECKED],
+                                        timeout=2.0)
+            except OSError:
+                return False          # not listening yet
+            return True
+        wait_for(connected, 180.0, 'the view bridge of helio paint --view')
+        assert viewer.subscribed.wait(120.0), f'advertised: {sorted(viewer.channels)}'
+        viewer.wait_until(lambda: all(viewer.messages[topic] for topic in VIEWED), 300.0,
+                          lambda: {topic: len(found) for topic, found in
+                                   viewer.messages.items()})
+        process.wait(timeout=600)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+        if viewer is not None:
+            viewer.close()
+    stdout, stderr = out.read_text(), err.read_text()
+    assert process.returncode == 0, stderr[-3000:]
+    assert 'Traceback' not in stderr
+    assert f'Foxglove view: ws://127.0.0.1:{port}' in stderr
+    for topic in VIEWED:
+        assert well_formed(viewer, topic), topic
+    assert str(tmp_path / 'run' / 'report.html') in stdout + stderr
     with open(tmp_path / 'run' / 'summary.json') as stream:
         summary = json.load(stream)
     assert (summary['dots_burnt'], summary['dots_skipped'], summary['dots_failed']) == (2, 0, 0)
@@ -173,7 +221,8 @@ def test_paint_starts_the_simulated_graph_paints_reports_and_stops_all_of_it(tmp
         assert np.min(np.hypot(charred[:, 0] - x, charred[:, 1] - y)) < 0.3e-3
     logs = tmp_path / 'run' / 'logs'
     started = sorted(p.stem for p in logs.glob('*.log'))
-    assert {'sim_world', 'dobot_driver', 'lens_planner', 'painter'} <= set(started)
+    assert {'sim_world', 'dobot_driver', 'lens_planner', 'painter', 'view_bridge'} <= set(
+        started)
     # no node process is left: every started executable's pid is gone
     leftovers = subprocess.run(['pgrep', '-f', str(logs)], capture_output=True, text=True)
     assert leftovers.stdout.strip() == ''
