@@ -149,8 +149,10 @@ class LensPlannerNode(Node):
             0.1, 60.0)
         # a driver killed mid-move never sends its result: its joint states stop (wall clock,
         # this node's own pauses not counted), and the move is given up (issue 31)
+        # longer than the painter's 1 s, its heating watchdog's: a driver merely starved of
+        # the CPU must not fail a calibration's move, and a painter watches its own moves
         device_silence = declare(
-            self, 'device_silence', 1.0,
+            self, 'device_silence', 2.0,
             "A move whose driver's joint states stop this long is given up and its goals "
             'canceled [s wall].', 0.1, 60.0)
         self.drivers = DriverSilence(device_silence, 0.5 * device_silence)
