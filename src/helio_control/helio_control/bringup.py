@@ -254,13 +254,13 @@ def wait_for_devices(graph, timeout, devices=('dobot', 'servo')):
     """
     Wait until each driver's latched `<device>/status` says it holds its (emulated) device.
 
-    `graph` is an ``InProcessGraph``. A driver started before the world retries the world's
+    `graph` is a ``ClientGraph``. A driver started before the world retries the world's
     pty with a growing delay (0.2 s, doubled each time up to the simulated graph's
     ``reconnect_max`` of 0.5 s), so it connects up to 0.5 s after the world opened its ports.
     """
     from helio_msgs.msg import DeviceStatus
     from helio_optics.node_kit import topics
-    from helio_optics.node_kit.in_process_graph import TRANSIENT_LOCAL_QOS
+    from helio_optics.node_kit.client_graph import TRANSIENT_LOCAL_QOS
     for device in devices:
         graph.collect(DeviceStatus, topics.device_status(device), TRANSIENT_LOCAL_QOS) \
             .wait_for_message(lambda status: status.connected, timeout)

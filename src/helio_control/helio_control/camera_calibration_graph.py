@@ -1,8 +1,8 @@
 """
 ``helio calibrate camera`` on the running graph: the drivers' actions, the camera's topic.
 
-``camera_calibration_run`` holds the procedure; this module gives it the graph (through an
-``InProcessGraph`` of the caller: the ``helio`` command's, or a test's):
+``camera_calibration_run`` holds the procedure; this module gives it the graph (through a
+``ClientGraph`` of the caller: the ``helio`` command's, or a test's):
 
 - ``GraphRig.move(x)``: ``move_arm`` (MOVJ_ANGLE, j1..j3) and ``move_wrist`` (yaw, pitch)
   together, both results asked for at once; a failed or refused move raises RuntimeError
@@ -38,7 +38,7 @@ class GraphRig:
     """The rig as the procedure sees it: moves through the drivers, frames from the camera."""
 
     def __init__(self, graph, timeout=30.0, move_timeout=120.0, frame_timeout=10.0):
-        """Connect the driver actions and the camera topics of `graph` (an InProcessGraph)."""
+        """Connect the driver actions and the camera topics of `graph` (a ClientGraph)."""
         from helio_msgs.action import MoveArm, MoveWrist
         from rclpy.qos import qos_profile_sensor_data
         from sensor_msgs.msg import CameraInfo, Image

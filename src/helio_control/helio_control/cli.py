@@ -473,8 +473,8 @@ class PaintSession:
         """Paint; return the exit status."""
         import rclpy
         from rclpy.action import ActionClient
-        from helio_optics.node_kit.in_process_graph import InProcessGraph
-        with InProcessGraph('helio_paint', namespace=self.arguments.namespace) as graph:
+        from helio_optics.node_kit.client_graph import ClientGraph
+        with ClientGraph('helio_paint', namespace=self.arguments.namespace) as graph:
             client = ActionClient(graph.helper, self.action_type, 'paint')
             try:
                 if not client.wait_for_server(timeout_sec=self.arguments.connect_timeout):
@@ -531,7 +531,7 @@ class PaintSession:
     def _wait_until_up(self, graph):
         """Wait until the started graph's nodes spin and its drivers hold their devices."""
         from helio_control.bringup import wait_until_up
-        from helio_optics.node_kit.in_process_graph import GraphFailure, GraphTimeout
+        from helio_optics.node_kit.client_graph import GraphFailure, GraphTimeout
         try:
             wait_until_up(graph, self.specs, self.arguments.start_timeout)
         except (GraphTimeout, GraphFailure) as error:
@@ -1069,12 +1069,12 @@ def command_calibrate(arguments):
     if arguments.what == 'dots':
         return command_calibrate_dots(arguments)
     from helio_msgs.action import CalibrateRig, CalibrateWorld
-    from helio_optics.node_kit.in_process_graph import GraphTimeout, InProcessGraph
+    from helio_optics.node_kit.client_graph import ClientGraph, GraphTimeout
     from rclpy.action import ActionClient
     action_type, name = {'rig': (CalibrateRig, 'calibrate_rig'),
                          'world': (CalibrateWorld, 'calibrate_world')}[arguments.what]
     goal = action_type.Goal(poses=arguments.poses, apply=not arguments.no_apply)
-    with InProcessGraph('helio_calibrate', namespace=arguments.namespace) as graph:
+    with ClientGraph('helio_calibrate', namespace=arguments.namespace) as graph:
         client = ActionClient(graph.helper, action_type, name)
         if not client.wait_for_server(timeout_sec=arguments.connect_timeout):
             raise CommandError(f'no lens planner answers on '
@@ -1113,7 +1113,7 @@ def command_calibrate_camera(arguments):
     """Calibrate the RGB camera over a ChArUco board on the running graph; write its file."""
     from helio_control.camera_calibration_graph import calibrate_on_graph, GraphRig
     from helio_optics.calibration_board import BoardSpec
-    from helio_optics.node_kit.in_process_graph import InProcessGraph
+    from helio_optics.node_kit.client_graph import ClientGraph
     spec = BoardSpec(tuple(arguments.board_squares), arguments.board_square,
                      arguments.board_marker, arguments.board_dictionary)
 
@@ -1121,7 +1121,7 @@ def command_calibrate_camera(arguments):
         print(f'[helio] view {min(index + 1, total)}/{total}: {note}', file=sys.stderr,
               flush=True)
 
-    with InProcessGraph('helio_calibrate', namespace=arguments.namespace) as graph:
+    with ClientGraph('helio_calibrate', namespace=arguments.namespace) as graph:
         done = calibrate_on_graph(
             graph, spec, tuple(arguments.board_centre), math.radians(arguments.board_yaw),
             arguments.poses or 25, arguments.calibration_dir,
@@ -1148,7 +1148,7 @@ def command_calibrate_dots(arguments):
     from helio_control.dot_size_calibration import calibration_row, DotCalibrationError
     from helio_control.dot_size_calibration_graph import calibrate_dots_on_graph
     from helio_msgs.action import PaintPattern
-    from helio_optics.node_kit.in_process_graph import GraphTimeout, InProcessGraph
+    from helio_optics.node_kit.client_graph import ClientGraph, GraphTimeout
     from rclpy.action import ActionClient
     try:
         goals = calibration_row(arguments.n_p_targets, arguments.dots_per_target,
@@ -1157,7 +1157,7 @@ def command_calibrate_dots(arguments):
         raise UsageError(str(error)) from None
     out = arguments.out or os.path.join('runs', 'calibrate_dots_' + datetime.datetime.now(
         datetime.timezone.utc).strftime('%Y%m%dT%H%M%SZ'))
-    with InProcessGraph('helio_calibrate', namespace=arguments.namespace) as graph:
+    with ClientGraph('helio_calibrate', namespace=arguments.namespace) as graph:
         client = ActionClient(graph.helper, PaintPattern, 'paint')
         if not client.wait_for_server(timeout_sec=arguments.connect_timeout):
             raise CommandError(f'no painter answers on {graph.helper.resolve_topic_name("paint")}'
@@ -1222,11 +1222,11 @@ def command_emergency_stop(arguments, engage):
     that every node running now still stops, and exits 1 saying so.
     """
     from helio_optics.node_kit import emergency_stop
-    from helio_optics.node_kit.in_process_graph import GraphTimeout, InProcessGraph
+    from helio_optics.node_kit.client_graph import ClientGraph, GraphTimeout
     from std_msgs.msg import Bool
     from std_srvs.srv import Trigger
     name = emergency_stop.SERVICE if engage else emergency_stop.RESET_SERVICE
-    with InProcessGraph(f'helio_{arguments.command}', namespace=arguments.namespace) as graph:
+    with ClientGraph(f'helio_{arguments.command}', namespace=arguments.namespace) as graph:
         client = graph.helper.create_client(Trigger, name)
         where = graph.helper.resolve_service_name(name)
         domain = os.environ.get('ROS_DOMAIN_ID', '') or '0 (unset)'

@@ -1,7 +1,7 @@
 """
 What ``helio doctor`` hears from a running graph: the facts ``helio_control.doctor`` checks.
 
-A client node (``InProcessGraph``, the graph's namespace) listens for `window` seconds:
+A client node (``ClientGraph``, the graph's namespace) listens for `window` seconds:
 the drivers' latched ``dobot/status`` and ``servo/status``, ``emergency_stop``, each
 camera's ``image_raw`` (raw CDR: only the header stamp is read, so images cost no
 conversion) and ``camera_info``, ``thermal/stats``, ``spot`` and ``/clock``. Meanwhile it
@@ -109,8 +109,8 @@ def gather(namespace='', window=3.0, calibration_dir=None, site_file=None, disco
     from helio_optics.config_files import config_path
     from helio_optics.node_kit import emergency_stop
     from helio_optics.node_kit.deployment import calibration_dir_or_default, rig_file_or_default
-    from helio_optics.node_kit.in_process_graph import GraphTimeout, InProcessGraph
-    from helio_optics.node_kit.in_process_graph import TRANSIENT_LOCAL_QOS
+    from helio_optics.node_kit.client_graph import ClientGraph, GraphTimeout
+    from helio_optics.node_kit.client_graph import TRANSIENT_LOCAL_QOS
     from rcl_interfaces.srv import GetParameters
     from rclpy.qos import qos_profile_sensor_data
     from rosgraph_msgs.msg import Clock
@@ -120,7 +120,7 @@ def gather(namespace='', window=3.0, calibration_dir=None, site_file=None, disco
     facts = Facts(window=window, namespace=namespace,
                   domain=os.environ.get('ROS_DOMAIN_ID', ''))
     lock = threading.Lock()
-    with InProcessGraph('helio_doctor', namespace=namespace) as graph:
+    with ClientGraph('helio_doctor', namespace=namespace) as graph:
         node = graph.helper
 
         def keep(store, convert):

@@ -32,9 +32,9 @@ from helio_msgs.action import MoveArm, MoveWrist
 from helio_msgs.msg import DeviceStatus, ThermalStats
 from helio_optics.geometry import transform_points
 from helio_optics.node_kit import topics
+from helio_optics.node_kit.client_graph import ClientGraph, TRANSIENT_LOCAL_QOS
 from helio_optics.node_kit.conversions import point_to_array, pose_to_matrix
 from helio_optics.node_kit.conversions import stamp_to_seconds
-from helio_optics.node_kit.in_process_graph import InProcessGraph, TRANSIENT_LOCAL_QOS
 from helio_optics.rig_kinematics import default_rig_file, load_rig_parameters, Rig
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 import yaml
@@ -76,7 +76,7 @@ def move_joints(graph, arm, wrist, x, timeout):
     """
     Move the arm (MOVJ_ANGLE) and the wrist to joints x together through the drivers.
 
-    `graph` is an InProcessGraph, `arm` and `wrist` its clients of move_arm and move_wrist.
+    `graph` is a ClientGraph, `arm` and `wrist` its clients of move_arm and move_wrist.
     Raise RuntimeError naming the driver that refused or failed.
     """
     handles = [graph.send_goal(arm, MoveArm.Goal(
@@ -151,7 +151,7 @@ def record_fixture(name, out_dir, work_dir):
               'd_lp': D_LP, 'retreat': RETREAT, 'world': WORLD, 'drivers': DRIVERS,
               'parameters': PERCEPTION, 'recording': RECORDING}
     logs = os.path.join(work_dir, 'logs')
-    with InProcessGraph(f'fixture_{name}') as graph:
+    with ClientGraph(f'fixture_{name}') as graph:
         group = start_graph(specs, log_dir=logs, on_death=lambda process: graph.fail(
             f'{process.label} died: {process.tail()}'))
         try:

@@ -13,6 +13,9 @@ this without importing upward.
 - ``conversions``: Image, CameraInfo, stamps, points and poses <-> numpy.
 - ``diagnostics.diagnostic_array``: one status on ``/diagnostics``.
 - ``process_tuning``: buffer reuse and frozen start-up objects for frame-rate nodes.
-- ``in_process_graph.InProcessGraph``: the in-process graph every node test uses.
+- ``client_graph.ClientGraph``: a client's graph (private Context, helper node, executor
+  thread, waits that never sleep): how the ``helio`` command talks to a running graph.
+- ``in_process_graph.InProcessGraph``: a ClientGraph with the nodes under test spun in it,
+  the in-process graph every node test uses.
 - ``processes``: nodes as separate processes (tests, bringup).
 """
