@@ -50,6 +50,35 @@ class CommandError(Exception):
     """A failure reported as one line and exit status 1."""
 
 
+# ---------------------------------------------------------------------------- the graph's actions
+START_THE_GRAPH = 'start the graph ("helio rig" or "helio sim")'
+
+
+def ros_domain():
+    """Return ROS_DOMAIN_ID as a message names it (unset: '0 (unset)')."""
+    return os.environ.get('ROS_DOMAIN_ID', '') or '0 (unset)'
+
+
+def no_server_error(graph, who, name, timeout, advice=START_THE_GRAPH):
+    """Return the CommandError of an action `name` nobody served: who, where, what to do."""
+    return CommandError(f'no {who} answers on {graph.helper.resolve_topic_name(name)} in '
+                        f'ROS_DOMAIN_ID {ros_domain()} within {timeout:g} s: {advice}')
+
+
+def connect_action(graph, action_type, name, timeout, who, advice=START_THE_GRAPH):
+    """
+    Return an ActionClient of the action `name` once its server answers.
+
+    `graph` is the command's ``ClientGraph``; no server within `timeout` s raises the
+    CommandError of ``no_server_error`` (`who`: the node expected to serve it).
+    """
+    from rclpy.action import ActionClient
+    client = ActionClient(graph.helper, action_type, name)
+    if not client.wait_for_server(timeout_sec=timeout):
+        raise no_server_error(graph, who, name, timeout, advice)
+    return client
+
+
 # ---------------------------------------------------------------------------- paint options
 def goal_options(goal_type):
     """
@@ -435,10 +464,10 @@ class ProgressBar:
             print(self.line(feedback), file=self.stream, flush=True)
 
 
-def default_run_dir():
-    """Return runs/<UTC time> under the current directory."""
+def default_run_dir(prefix=''):
+    """Return runs/<prefix><UTC time> under the current directory."""
     stamp = datetime.datetime.now(datetime.timezone.utc).strftime('%Y%m%dT%H%M%SZ')
-    return os.path.join('runs', stamp)
+    return os.path.join('runs', prefix + stamp)
 
 
 def command_paint(arguments, action_type):
@@ -472,33 +501,19 @@ class PaintSession:
     def run(self, goal):
         """Paint; return the exit status."""
         import rclpy
-        from rclpy.action import ActionClient
         from helio_optics.node_kit.client_graph import ClientGraph
         with ClientGraph('helio_paint', namespace=self.arguments.namespace) as graph:
-            client = ActionClient(graph.helper, self.action_type, 'paint')
             try:
-                if not client.wait_for_server(timeout_sec=self.arguments.connect_timeout):
-                    if not self.arguments.sim:
-                        # never the simulator unless asked: a rig's graph in another domain
-                        # or namespace, or slow to start, is not painted in a simulation
-                        domain = os.environ.get('ROS_DOMAIN_ID', '') or '0 (unset)'
-                        raise CommandError(
-                            f'no painter answers on {graph.helper.resolve_topic_name("paint")}'
-                            f' in ROS_DOMAIN_ID {domain} within '
-                            f'{self.arguments.connect_timeout:g} s: start the graph ("helio '
-                            'rig" or "helio sim"), check ROS_DOMAIN_ID and --namespace, or add '
-                            '--sim to paint in the simulated world')
-                    self._start_graph()
-                    if hasattr(goal, 'fresh'):
-                        goal.fresh = True     # a new simulated panel: nothing is burnt yet
-                    if not client.wait_for_server(timeout_sec=self.arguments.start_timeout):
-                        self._graph_check()
-                        raise CommandError(
-                            f'the simulated graph started but no painter answers on '
-                            f'{graph.helper.resolve_topic_name("paint")} within '
-                            f'{self.arguments.start_timeout:g} s (logs: {self.log_dir})')
-                    self._wait_until_up(graph)
-                elif self.arguments.set:
+                if self.arguments.sim:
+                    client = self._painter_or_simulation(graph, goal)
+                else:
+                    # never the simulator unless asked: a rig's graph in another domain or
+                    # namespace, or slow to start, is not painted in a simulation
+                    client = connect_action(
+                        graph, self.action_type, 'paint', self.arguments.connect_timeout,
+                        'painter', START_THE_GRAPH + ', check ROS_DOMAIN_ID and --namespace, '
+                        'or add --sim to paint in the simulated world')
+                if self.group is None and self.arguments.set:
                     raise CommandError(
                         '--set sets the parameters of the simulated graph that helio paint '
                         'starts, but a painter already answers on '
@@ -510,6 +525,27 @@ class PaintSession:
                 return self._paint(graph, client, goal)
             finally:
                 self._stop(rclpy)
+
+    def _painter_or_simulation(self, graph, goal):
+        """Return the paint client: of the painter that answers, else of a started sim graph."""
+        try:
+            return connect_action(graph, self.action_type, 'paint',
+                                  self.arguments.connect_timeout, 'painter')
+        except CommandError:
+            pass                      # none: the simulated graph is started for this goal
+        self._start_graph()
+        if hasattr(goal, 'fresh'):
+            goal.fresh = True         # a new simulated panel: nothing is burnt yet
+        try:
+            client = connect_action(graph, self.action_type, 'paint',
+                                    self.arguments.start_timeout, 'painter',
+                                    f'the simulated graph started without one (logs: '
+                                    f'{self.log_dir})')
+        except CommandError:
+            self._graph_check()       # a node that died is the better reason
+            raise
+        self._wait_until_up(graph)
+        return client
 
     @property
     def log_dir(self):
@@ -1070,17 +1106,12 @@ def command_calibrate(arguments):
         return command_calibrate_dots(arguments)
     from helio_msgs.action import CalibrateRig, CalibrateWorld
     from helio_optics.node_kit.client_graph import ClientGraph, GraphTimeout
-    from rclpy.action import ActionClient
     action_type, name = {'rig': (CalibrateRig, 'calibrate_rig'),
                          'world': (CalibrateWorld, 'calibrate_world')}[arguments.what]
     goal = action_type.Goal(poses=arguments.poses, apply=not arguments.no_apply)
     with ClientGraph('helio_calibrate', namespace=arguments.namespace) as graph:
-        client = ActionClient(graph.helper, action_type, name)
-        if not client.wait_for_server(timeout_sec=arguments.connect_timeout):
-            raise CommandError(f'no lens planner answers on '
-                               f'{graph.helper.resolve_topic_name(name)} within '
-                               f'{arguments.connect_timeout:g} s: start the graph ("helio '
-                               'rig" or "helio sim")')
+        client = connect_action(graph, action_type, name, arguments.connect_timeout,
+                                'lens planner')
         last = {}
 
         def progress(message):
@@ -1149,20 +1180,15 @@ def command_calibrate_dots(arguments):
     from helio_control.dot_size_calibration_graph import calibrate_dots_on_graph
     from helio_msgs.action import PaintPattern
     from helio_optics.node_kit.client_graph import ClientGraph, GraphTimeout
-    from rclpy.action import ActionClient
     try:
         goals = calibration_row(arguments.n_p_targets, arguments.dots_per_target,
                                 tuple(arguments.row), arguments.pitch)
     except ValueError as error:
         raise UsageError(str(error)) from None
-    out = arguments.out or os.path.join('runs', 'calibrate_dots_' + datetime.datetime.now(
-        datetime.timezone.utc).strftime('%Y%m%dT%H%M%SZ'))
+    out = arguments.out or default_run_dir('calibrate_dots_')
     with ClientGraph('helio_calibrate', namespace=arguments.namespace) as graph:
-        client = ActionClient(graph.helper, PaintPattern, 'paint')
-        if not client.wait_for_server(timeout_sec=arguments.connect_timeout):
-            raise CommandError(f'no painter answers on {graph.helper.resolve_topic_name("paint")}'
-                               f' within {arguments.connect_timeout:g} s: start the graph '
-                               '("helio rig" or "helio sim")')
+        client = connect_action(graph, PaintPattern, 'paint', arguments.connect_timeout,
+                                'painter')
         try:
             calibration, samples, path, messages = calibrate_dots_on_graph(
                 graph, client, PaintPattern.Goal, out, goals, arguments.calibration_dir,
@@ -1229,7 +1255,7 @@ def command_emergency_stop(arguments, engage):
     with ClientGraph(f'helio_{arguments.command}', namespace=arguments.namespace) as graph:
         client = graph.helper.create_client(Trigger, name)
         where = graph.helper.resolve_service_name(name)
-        domain = os.environ.get('ROS_DOMAIN_ID', '') or '0 (unset)'
+        domain = ros_domain()
         try:
             response = graph.call(client, Trigger.Request(), arguments.timeout)
         except GraphTimeout:
