@@ -952,8 +952,7 @@ def command_sky(arguments):
         site = load_site(site_file)
         rig = Rig(load_rig_parameters(rig_file_or_default(arguments.rig or '')))
         options = load_plan_options(arguments.picture_config, **{
-            name: getattr(arguments, name) for name in
-            ('canvas_size', 'offset_x', 'offset_y', 'd_lp', 'retreat')})
+            name: getattr(arguments, name) for name in SKY_PICTURE_OPTIONS})
         options.validate()
         settings = sky.SkySettings.from_plan_options(
             options, min_elevation_deg=arguments.min_elevation,
@@ -1029,8 +1028,13 @@ def _size(text):
     return width, height
 
 
+# the picture options that decide where the canvas is and whether the sun serves it
+SKY_PICTURE_OPTIONS = ('canvas_size', 'offset_x', 'offset_y', 'd_lp', 'retreat')
+
+
 def add_sky_parser(commands):
     """Add the ``sky`` sub-command to the sub-parsers `commands`."""
+    from helio_control.picture_options import add_option_arguments
     sky = commands.add_parser(
         'sky', help='when the sun serves the canvas on a day, and the best heading',
         description='For the site, a date and the rig heading: the hours in which every canvas '
@@ -1046,10 +1050,8 @@ def add_sky_parser(commands):
     sky.add_argument('--rig', help="rig file (default: the workspace's config/rig.yaml)")
     sky.add_argument('--picture-config', help='picture options file (default: '
                      'config/picture.yaml): canvas, d_lp, retreat')
-    for name, what in (('canvas-size', 'canvas side l_w'), ('offset-x', 'canvas offset d_x'),
-                       ('offset-y', 'canvas offset d_y'), ('d-lp', 'heating distance d_lp'),
-                       ('retreat', 'retreat delta d_lp')):
-        sky.add_argument(f'--{name}', type=_finite_float, metavar='M', help=f'{what} [m]')
+    add_option_arguments(sky, SKY_PICTURE_OPTIONS, dict.fromkeys(SKY_PICTURE_OPTIONS,
+                                                                 _finite_float))
     zone = sky.add_mutually_exclusive_group()
     zone.add_argument('--timezone', metavar='NAME', help='IANA time zone of the table, e.g. '
                       "Europe/Berlin (default: the site's longitude, 15 deg an hour)")

@@ -48,9 +48,18 @@ class PlanOptionsError(ValueError):
     """Nonsense options (sizes, modes); the message names the option."""
 
 
+# the options that take one of a few words (the codes their modules run)
+OPTION_CHOICES = {'feature_mode': FEATURE_MODES + ('auto',), 'ordering': ORDERINGS,
+                  'v_axis': ('flip', 'paper'), 'tone_kernel': tuple(KERNELS)}
+
+
 @dataclass
 class PlanOptions:
-    """Options of a plan; names and defaults of config/picture.yaml (SI units)."""
+    """
+    Options of a plan; names and defaults of config/picture.yaml (SI units).
+
+    What each one means, and its unit: ``picture_options.OPTIONS``.
+    """
 
     canvas_size: float = 0.08
     dot_radius: float = 0.002
@@ -117,9 +126,7 @@ class PlanOptions:
         if self.n_p_min > self.n_p_target:
             raise PlanOptionsError(f'n_p_min {self.n_p_min} exceeds n_p_target '
                                    f'{self.n_p_target}')
-        choices = {'feature_mode': FEATURE_MODES + ('auto',), 'ordering': ORDERINGS,
-                   'v_axis': ('flip', 'paper'), 'tone_kernel': tuple(KERNELS)}
-        for name, allowed in choices.items():
+        for name, allowed in OPTION_CHOICES.items():
             if getattr(self, name) not in allowed:
                 raise PlanOptionsError(f'{name} must be one of {", ".join(allowed)}, got '
                                        f'{getattr(self, name)!r}')
@@ -153,6 +160,7 @@ def load_plan_options(path=None, **overrides):
     return PlanOptions(**values)
 
 
+# the options a PaintPattern goal carries (a test holds them to the action's fields)
 GOAL_FIELDS = ('canvas_size', 'dot_radius', 'offset_x', 'offset_y', 'n_p_target',
                'feature_mode', 'ordering')
 

@@ -8,24 +8,25 @@ crosses, a scale bar and the figures; the input picture beside it) and ``DIR/pla
 estimate, quality, mode and every parameter used).
 
 PICTURE is a file OpenCV reads or ``sample:text``, ``sample:logo``, ``sample:portrait``.
-The options are those of the PaintPattern goal (canvas_size, dot_radius, offset_x,
-offset_y, n_p_target, feature_mode, ordering) plus a few of config/picture.yaml.
+The options are the picture options (``plan.PlanOptions``, config/picture.yaml), one
+each, generated with their unit and meaning from ``picture_options.OPTIONS``; an option
+not given keeps the options file's value.
 
 Exit status: 0 done, 1 the picture or the plan failed (one line on stderr), 2 bad
 options. It becomes a sub-command of the operator command line later.
 """
 
 import argparse
+from dataclasses import fields
 import math
 import os
 import sys
 
 import cv2
-from helio_control.features import FEATURE_MODES
-from helio_control.halftone import KERNELS
-from helio_control.path_ordering import ORDERINGS
 from helio_control.picture_input import load_picture, PictureError
-from helio_control.plan import load_plan_options, plan_picture, PlanError, PlanOptionsError
+from helio_control.picture_options import add_option_arguments
+from helio_control.plan import load_plan_options, OPTION_CHOICES, plan_picture, PlanError
+from helio_control.plan import PlanOptions, PlanOptionsError
 import numpy as np
 
 MARKER_SIDE = 0.04           # ArUco marker side drawn at the world origin [m]
@@ -156,6 +157,9 @@ def write_preview(plan, picture, directory):
     return png, path
 
 
+OPTION_NAMES = tuple(f.name for f in fields(PlanOptions))     # every one is an option here
+
+
 def build_parser(prog='python -m helio_control.preview'):
     """Return the argparse parser of the preview command (`prog`: how it was called)."""
     parser = argparse.ArgumentParser(
@@ -166,31 +170,10 @@ def build_parser(prog='python -m helio_control.preview'):
                                         'sample:text, sample:logo, sample:portrait')
     parser.add_argument('--out', default='.', help='output directory (default: .)')
     parser.add_argument('--config', help='picture options file (default: config/picture.yaml)')
-    parser.add_argument('--canvas-size', type=float, help='canvas side l_w [m]')
-    parser.add_argument('--dot-radius', type=float, help='dot pitch r_p [m] (paper 0.002)')
-    parser.add_argument('--offset-x', type=float, help='canvas offset d_x [m]')
-    parser.add_argument('--offset-y', type=float, help='canvas offset d_y [m]')
-    parser.add_argument('--n-p-target', type=int, help='N_p target per dot [pixels]')
-    parser.add_argument('--feature-mode', choices=FEATURE_MODES + ('auto',))
-    parser.add_argument('--ordering', choices=ORDERINGS)
-    parser.add_argument('--v-axis', choices=('flip', 'paper'),
-                        help='flip: picture top at the largest world y (default); '
-                             'paper: y = v r_p + d_y')
-    parser.add_argument('--tone-kernel', choices=tuple(KERNELS))
-    parser.add_argument('--tone-dot-size', action='store_true', default=None,
-                        help='tones: also scale N_p per dot with darkness')
-    parser.add_argument('--solver-budget', type=float, dest='solver_budget_s',
-                        help='fast_tsp time budget [s] (0: automatic)')
-    parser.add_argument('--sun-elevation', type=float, dest='sun_elevation_deg',
-                        help='nominal sun elevation [deg]')
-    parser.add_argument('--sun-azimuth', type=float, dest='sun_azimuth_deg',
-                        help='nominal sun azimuth, counter-clockwise from robot x [deg]')
+    add_option_arguments(
+        parser.add_argument_group("picture options (not given: the options file's value)"),
+        OPTION_NAMES, {f.name: type(f.default) for f in fields(PlanOptions)}, OPTION_CHOICES)
     return parser
-
-
-OPTION_NAMES = ('canvas_size', 'dot_radius', 'offset_x', 'offset_y', 'n_p_target',
-                'feature_mode', 'ordering', 'v_axis', 'tone_kernel', 'tone_dot_size',
-                'solver_budget_s', 'sun_elevation_deg', 'sun_azimuth_deg')
 
 
 def main(args=None, prog='python -m helio_control.preview'):
