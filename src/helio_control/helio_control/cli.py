@@ -101,25 +101,27 @@ def goal_options(goal_type):
     return options
 
 
-def _non_negative_int(text):
-    value = int(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f'must be >= 0, not {value}')
-    return value
+def _number(name, convert, accept, rule):
+    """
+    Return an argparse type called `name`: `convert` the text, refuse what `accept` does not.
+
+    A text `convert` cannot read is "invalid <name> value"; a number it refuses, "must be
+    <rule>, not <text>".
+    """
+    def parse(text):
+        value = convert(text)
+        if not accept(value):
+            raise argparse.ArgumentTypeError(f'must be {rule}, not {text}')
+        return value
+    parse.__name__ = name
+    return parse
 
 
-def _positive_int(text):
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f'must be >= 1, not {value}')
-    return value
-
-
-def _finite_float(text):
-    value = float(text)
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f'must be a finite number, not {text}')
-    return value
+_non_negative_int = _number('_non_negative_int', int, lambda value: value >= 0, '>= 0')
+_positive_int = _number('_positive_int', int, lambda value: value >= 1, '>= 1')
+_finite_float = _number('_finite_float', float, math.isfinite, 'a finite number')
+_positive_float = _number('_positive_float', float,
+                          lambda value: math.isfinite(value) and value > 0.0, '> 0')
 
 
 def _point(text):
@@ -941,6 +943,7 @@ def command_sky(arguments):
     import time
     import zoneinfo
     from helio_control import sky
+    from helio_control.picture_options import CANVAS_OPTIONS
     from helio_control.plan import load_plan_options, PlanOptionsError
     from helio_optics.ephemeris import load_site
     from helio_optics.node_kit.deployment import deployment_file_or_default
@@ -952,7 +955,7 @@ def command_sky(arguments):
         site = load_site(site_file)
         rig = Rig(load_rig_parameters(rig_file_or_default(arguments.rig or '')))
         options = load_plan_options(arguments.picture_config, **{
-            name: getattr(arguments, name) for name in SKY_PICTURE_OPTIONS})
+            name: getattr(arguments, name) for name in CANVAS_OPTIONS})
         options.validate()
         settings = sky.SkySettings.from_plan_options(
             options, min_elevation_deg=arguments.min_elevation,
@@ -1003,13 +1006,6 @@ def command_sky(arguments):
     return EXIT_OK
 
 
-def _positive_float(text):
-    value = _finite_float(text)
-    if value <= 0.0:
-        raise argparse.ArgumentTypeError(f'must be > 0, not {text}')
-    return value
-
-
 def _date(text):
     try:
         return datetime.date.fromisoformat(text)
@@ -1028,13 +1024,9 @@ def _size(text):
     return width, height
 
 
-# the picture options that decide where the canvas is and whether the sun serves it
-SKY_PICTURE_OPTIONS = ('canvas_size', 'offset_x', 'offset_y', 'd_lp', 'retreat')
-
-
 def add_sky_parser(commands):
     """Add the ``sky`` sub-command to the sub-parsers `commands`."""
-    from helio_control.picture_options import add_option_arguments
+    from helio_control.picture_options import add_option_arguments, CANVAS_OPTIONS
     sky = commands.add_parser(
         'sky', help='when the sun serves the canvas on a day, and the best heading',
         description='For the site, a date and the rig heading: the hours in which every canvas '
@@ -1050,8 +1042,7 @@ def add_sky_parser(commands):
     sky.add_argument('--rig', help="rig file (default: the workspace's config/rig.yaml)")
     sky.add_argument('--picture-config', help='picture options file (default: '
                      'config/picture.yaml): canvas, d_lp, retreat')
-    add_option_arguments(sky, SKY_PICTURE_OPTIONS, dict.fromkeys(SKY_PICTURE_OPTIONS,
-                                                                 _finite_float))
+    add_option_arguments(sky, CANVAS_OPTIONS, dict.fromkeys(CANVAS_OPTIONS, _finite_float))
     zone = sky.add_mutually_exclusive_group()
     zone.add_argument('--timezone', metavar='NAME', help='IANA time zone of the table, e.g. '
                       "Europe/Berlin (default: the site's longitude, 15 deg an hour)")

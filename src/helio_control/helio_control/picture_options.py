@@ -102,6 +102,10 @@ OPTIONS = {
 }
 
 
+# the options that place the canvas and the lens over it: what ``helio sky`` checks the sun for
+CANVAS_OPTIONS = ('canvas_size', 'offset_x', 'offset_y', 'd_lp', 'retreat')
+
+
 def help_line(name):
     """Return the ``--help`` line of the picture option `name` (KeyError: no such option)."""
     return OPTIONS[name].line()

@@ -62,6 +62,8 @@ import math
 
 from helio_control import sun_sweep
 from helio_control.dot_layout import check_reach
+from helio_control.picture_options import CANVAS_OPTIONS
+from helio_control.plan import PlanOptions
 from helio_optics.ephemeris import ray_angles_from_sun, Site, sun_position
 from helio_optics.geometry import direction_from_angles, invert_transform, PinholeCamera
 from helio_optics.geometry import transform_points
@@ -100,11 +102,11 @@ class SkySettings:
     Camera: the simulated RGB camera (640 x 480 px, 70 deg horizontal field of view).
     """
 
-    canvas_size: float = 0.08
-    offset_x: float = 0.05
-    offset_y: float = 0.05
-    d_lp: float = 0.082
-    retreat: float = 0.03
+    canvas_size: float = PlanOptions.canvas_size      # the canvas: the picture options'
+    offset_x: float = PlanOptions.offset_x
+    offset_y: float = PlanOptions.offset_y
+    d_lp: float = PlanOptions.d_lp
+    retreat: float = PlanOptions.retreat
     reach_spacing: float = 0.01
     min_elevation_deg: float = 30.0
     need_marker: bool = False
@@ -152,8 +154,7 @@ class SkySettings:
     @classmethod
     def from_plan_options(cls, options, **overrides):
         """Take the canvas, d_lp and retreat of PlanOptions (picture.yaml), then `overrides`."""
-        canvas = {name: getattr(options, name) for name in
-                  ('canvas_size', 'offset_x', 'offset_y', 'd_lp', 'retreat')}
+        canvas = {name: getattr(options, name) for name in CANVAS_OPTIONS}
         return cls(**{**canvas, **overrides})
 
     def camera(self):

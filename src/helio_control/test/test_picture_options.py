@@ -11,8 +11,8 @@ import os
 import re
 
 from helio_control.action_docs import field_comments, installed_action_text
-from helio_control.cli import build_parser, SKY_PICTURE_OPTIONS
-from helio_control.picture_options import help_line, option_flag, OPTIONS
+from helio_control.cli import build_parser
+from helio_control.picture_options import CANVAS_OPTIONS, help_line, option_flag, OPTIONS
 from helio_control.plan import GOAL_FIELDS, OPTION_CHOICES, PlanOptions
 from helio_control.preview import build_parser as preview_parser
 from helio_msgs.action import PaintPattern
@@ -107,7 +107,7 @@ def test_preview_options_given_and_not_given(arguments, expected):
 
 def test_sky_and_paint_show_the_same_descriptions():
     sky = subparser('sky')
-    for name in SKY_PICTURE_OPTIONS:
+    for name in CANVAS_OPTIONS:
         assert option_help(sky, name) == help_line(name)
     paint = subparser('paint')
     for name in GOAL_FIELDS:
