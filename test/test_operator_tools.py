@@ -96,7 +96,7 @@ def test_paint_options_are_the_goal_fields_one_to_one():
     # each with its meaning and unit from the action's own comments, not "goal field NAME"
     flat = ' '.join(paint.split())
     assert not any(f'goal field {name}' in flat for name in options)
-    assert 'dot_radius: projected spot radius r_p [m]' in flat
+    assert 'dot_radius: dot pitch r_p [m]' in flat and 'dot-size calibration' in flat
 
 
 @pytest.mark.parametrize('arguments, status, message', [
