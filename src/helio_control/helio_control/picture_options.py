@@ -51,7 +51,8 @@ OPTIONS = {
     'dot_radius': OptionDoc(
         'dot pitch r_p', 'm', 'the spacing of the dot grid (paper 0.2 cm); with a dot-size '
         'calibration (dots.yaml, "helio calibrate dots") the painter also burns each dot this '
-        'wide, without one a dot is as wide as n_p_target makes it'),
+        'wide unless n_p_target is given; without one a dot is as wide as n_p_target makes '
+        'it'),
     'offset_x': OptionDoc('canvas offset d_x', 'm', 'the canvas corner from the marker centre '
                           'along world x (paper 5 cm)'),
     'offset_y': OptionDoc('canvas offset d_y', 'm', 'the canvas corner from the marker centre '
