@@ -32,6 +32,7 @@ import argparse
 import datetime
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -140,6 +141,7 @@ def add_goal_options(parser, goal_type, comments=None):
     {field: comment}, by default read from the installed PaintPattern.action), where its unit
     and meaning are written once.
     """
+    from helio_control.picture_options import unit_metavar
     if comments is None:
         from helio_control import action_docs
         comments = action_docs.field_comments(
@@ -148,6 +150,7 @@ def add_goal_options(parser, goal_type, comments=None):
     for name, kind, option in goal_options(goal_type):
         meaning = comments.get(name, '').replace('%', '%%')
         text = f'{name}: {meaning}' if meaning else f'goal field {name}'
+        unit = re.search(r'\[([^\]]+)\]', meaning)
         if kind == 'bool':
             group.add_argument(option, dest=f'goal_{name}', action='store_true', default=None,
                                help=text)
@@ -157,7 +160,10 @@ def add_goal_options(parser, goal_type, comments=None):
         else:
             convert = {'float': _finite_float, 'int': _non_negative_int, 'signed': int,
                        'str': str}[kind]
-            group.add_argument(option, dest=f'goal_{name}', type=convert, help=text)
+            metavar = 'TEXT' if kind == 'str' else unit_metavar(
+                unit.group(1) if unit else '', float if kind == 'float' else int)
+            group.add_argument(option, dest=f'goal_{name}', type=convert, help=text,
+                               metavar=metavar)
 
 
 def build_goal(goal_type, arguments, picture):

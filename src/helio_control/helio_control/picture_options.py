@@ -39,10 +39,12 @@ class OptionDoc:
 
     def metavar(self, kind):
         """Return the placeholder of a value of this option (`kind`: its type)."""
-        return _METAVARS.get(self.unit, 'N' if kind is int else 'X')
+        return unit_metavar(self.unit, kind)
 
 
-_METAVARS = {'m': 'M', 'deg': 'DEG', 's': 'S'}
+def unit_metavar(unit, kind):
+    """Return the placeholder of a value in `unit` of type `kind`: M, DEG, S, else N or X."""
+    return {'m': 'M', 'deg': 'DEG', 's': 'S'}.get(unit, 'N' if kind is int else 'X')
 
 
 OPTIONS = {
