@@ -13,7 +13,10 @@ comes much later than its period says the process was away, and the silence is c
 again from then. A driver that is really silent is then reported at most ``device_silence``
 after the watcher came back.
 
-Pure Python: no rclpy. Times in seconds on one monotonic clock.
+``DeviceFaults`` adds the drivers' own word (their latched ``dobot/status``,
+``servo/status``: not connected, alarms) and tells when a fault is new, so the painter can
+wake its heating loop at once. Pure Python: no rclpy. Times in seconds on one monotonic
+clock.
 """
 
 import math
@@ -53,6 +56,12 @@ class DriverSilence:
         """Note joint states from `device` at `now`."""
         self._heard[device] = float(now)
 
+    def heard_joints(self, joint_names, now):
+        """Note joint states of `joint_names` at `now` (from their driver, ``device_of``)."""
+        device = device_of(joint_names)
+        if device:
+            self.heard(device, now)
+
     def tick(self, now):
         """Note that the watcher runs at `now`; return the pause it just came back from, or 0."""
         now = float(now)
@@ -69,3 +78,63 @@ class DriverSilence:
         now = float(now)
         return {device: now - heard for device, heard in self._heard.items()
                 if now - max(heard, self._back) > self.silence}
+
+    def faults(self, now):
+        """Return [(device, why)] of the drivers silent `now`, by device."""
+        return [(device, f'{device} silent for {seconds:.1f} s (no joint states: driver '
+                         'stopped?)') for device, seconds in sorted(self.silent(now).items())]
+
+
+class DeviceFaults:
+    """
+    The devices' faults: each driver's status (not connected, alarms), then its silence.
+
+    ``status`` takes a driver's DeviceStatus fields, ``joint_states`` the names of joint
+    states heard, ``watch`` the watcher's steady tick (``DriverSilence.tick``); a fault not
+    reported before (a new status fault, a driver newly silent) calls `wake`.
+    """
+
+    def __init__(self, silence, pause, wake=lambda: None):
+        """Count a driver silent after `silence` [s] (``DriverSilence``, `pause` [s])."""
+        self.wake = wake
+        self.drivers = DriverSilence(silence, pause)
+        self.reported = {}              # device -> why, from its status
+        self._silent_seen = set()       # the drivers silent at the last watch
+
+    def status(self, device, connected, message, alarms):
+        """Take a device's status; wake on a fault not reported before."""
+        problem = ''
+        if not connected:
+            problem = f'{device} not connected ({message})'
+        elif alarms:
+            problem = f'{device} alarm: {", ".join(alarms)}'
+        if not problem:
+            self.reported.pop(device, None)
+            return
+        new = device not in self.reported
+        self.reported[device] = problem
+        if new:
+            self.wake()
+
+    def joint_states(self, joint_names, now):
+        """Note joint states of `joint_names` heard at `now`."""
+        self.drivers.heard_joints(joint_names, now)
+
+    def watch(self, now):
+        """Tick at `now`, wake on a driver newly silent; return the pause come back from [s]."""
+        pause = self.drivers.tick(now)
+        silent = set(self.drivers.silent(now))
+        if silent - self._silent_seen:
+            self.wake()
+        self._silent_seen = silent
+        return pause
+
+    def faults(self, now, devices=None):
+        """Return [(device, why)]: the reported faults, then the silent drivers (of `devices`)."""
+        return [(device, why) for device, why in
+                list(self.reported.items()) + self.drivers.faults(now)
+                if devices is None or device in devices]
+
+    def sentence(self, now, devices=None):
+        """Return the faults of `devices` (None: all) `now` in one sentence, '' if none."""
+        return '; '.join(why for _, why in self.faults(now, devices))

@@ -35,7 +35,7 @@ import time
 from geometry_msgs.msg import PoseStamped
 from helio_control.calibration_store import CalibrationRefused, load_calibration
 from helio_control.calibration_store import rig_description, save_calibration
-from helio_control.driver_silence import device_of, DriverSilence
+from helio_control.driver_silence import DriverSilence
 from helio_control.lens_planner_parameters import declare_heating_distance, declare_settings
 from helio_control.node_lens_rig import goal_runner, NodeLensRig, UNATTENDED
 from helio_control.procedures import focus
@@ -288,9 +288,7 @@ class LensPlannerNode(Node):
 
     def _on_joint_state(self, message):
         problem = self.joints.add_message(message, received=time.monotonic())
-        device = device_of(message.name)
-        if device:
-            self.drivers.heard(device, time.monotonic())
+        self.drivers.heard_joints(message.name, time.monotonic())
         if problem:
             self.get_logger().warning(problem, throttle_duration_sec=5.0)
 

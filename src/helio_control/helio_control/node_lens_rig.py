@@ -13,12 +13,12 @@ import time
 import traceback
 
 from action_msgs.msg import GoalStatus
+from helio_control.goal_sending import accepted, GoalNotRun, result_unless
 from helio_control.procedures.lens_rig_port import GoalCanceled, GoalFailed, LensRigPort
 from helio_msgs.action import FocusLens, MoveArm, MoveWrist
 from helio_msgs.srv import EstimateSun
 from helio_optics.node_kit import emergency_stop
-from helio_optics.node_kit.awaitables import cancel_if_accepted, discovered, FirstOf, GoalTrouble
-from helio_optics.node_kit.awaitables import in_thread, results_unless, sleep, within
+from helio_optics.node_kit.awaitables import discovered, FirstOf, in_thread, sleep, within
 from helio_optics.node_kit.conversions import stamp_from_seconds, stamp_to_seconds
 import numpy as np
 
@@ -258,17 +258,21 @@ class NodeLensRig(LensRigPort):
         try:
             for client, goal, name in ((node.arm, arm_goal, 'move_arm'),
                                        (node.wrist, wrist_goal, 'move_wrist')):
-                handles.append(await self._accepted(client, goal, name))
+                try:
+                    handles.append(await accepted(
+                        node, client, goal, name, node.goal_accept_timeout,
+                        hint='is its driver running?', refused='another move running?'))
+                except GoalNotRun as failure:
+                    for handle in handles:           # the other device must not move alone
+                        handle.cancel_goal_async()
+                    raise GoalFailed(str(failure)) from None
                 node.driver_goals.append(handles[-1])
             # a driver killed mid-move never answers (its server stays discovered for
             # seconds): its silence ends the wait, and the goals are canceled
-            arm_reply, wrist_reply = await results_unless(node, handles, self._silent_drivers)
-        except GoalTrouble as trouble:
-            raise GoalFailed(f'the move was given up: {trouble}') from None
-        except GoalFailed:
-            for handle in handles:
-                handle.cancel_goal_async()
-            raise
+            arm_reply, wrist_reply = await result_unless(node, handles, self._silent_drivers,
+                                                         'the move was')
+        except GoalNotRun as failure:
+            raise GoalFailed(str(failure)) from None
         finally:
             for handle in handles:
                 node.driver_goals.remove(handle)
@@ -283,24 +287,9 @@ class NodeLensRig(LensRigPort):
         return np.array([*arm_result.achieved_joints[:3], wrist_result.achieved_yaw,
                          wrist_result.achieved_pitch])
 
-    async def _accepted(self, client, goal, name):
-        """Send `goal`; return its handle once accepted (GoalFailed: refused, or no answer)."""
-        sent = client.send_goal_async(goal)
-        limit = self.node.goal_accept_timeout
-        if not await within(self.node, sent, limit, wall=True):
-            sent.add_done_callback(cancel_if_accepted)     # late: it must not move after all
-            raise GoalFailed(f'{name} did not accept the goal within {limit:g} s (is its '
-                             'driver running?)')
-        handle = sent.result()
-        if not handle.accepted:
-            raise GoalFailed(f'{name} refused the goal (another move running?)')
-        return handle
-
     def _silent_drivers(self):
         """Say which drivers' joint states stopped (device_silence of wall time), or ''."""
-        silent = self.node.drivers.silent(time.monotonic())
-        return '; '.join(f'{device} silent for {seconds:.1f} s (no joint states: driver '
-                         'stopped?)' for device, seconds in sorted(silent.items()))
+        return '; '.join(why for _, why in self.node.drivers.faults(time.monotonic()))
 
     async def observe(self, count, accept):
         """Return `count` spot observations imaged after now (after the settle time)."""

@@ -1,6 +1,6 @@
-"""DriverSilence: a driver's silence counts only while the watcher itself runs."""
+"""DriverSilence: a driver's silence counts only while the watcher runs; DeviceFaults."""
 
-from helio_control.driver_silence import DriverSilence
+from helio_control.driver_silence import DeviceFaults, DriverSilence
 import pytest
 
 
@@ -68,3 +68,35 @@ def test_each_joint_name_belongs_to_the_driver_that_publishes_it():
     assert device_of(['lens_yaw', 'lens_pitch']) == 'servo'
     assert {device_of([name]) for name in JOINT_NAMES} == {'dobot', 'servo'}
     assert device_of(['wheel_left']) == '' and device_of([]) == ''
+
+
+def watching(faults, start, end, period=0.05):
+    """Watch `faults` every `period` from `start` to `end` [s]."""
+    for t in [start + k * period for k in range(int(round((end - start) / period)) + 1)]:
+        faults.watch(t)
+
+
+def test_device_faults_list_status_faults_then_silent_drivers_and_wake_once_per_new_fault():
+    woken = []
+    faults = DeviceFaults(silence=1.0, pause=0.25, wake=lambda: woken.append(True))
+    faults.joint_states(['dobot_j1', 'dobot_j2'], 10.0)
+    faults.joint_states(['lens_yaw', 'lens_pitch'], 10.0)
+    faults.status('servo', True, '', [])                # a status without a fault
+    assert woken == [] and faults.faults(10.0) == []
+    faults.status('dobot', True, '', ['LIMIT', 'PLAN'])
+    faults.status('dobot', True, '', ['LIMIT'])        # the same device again: no wake
+    assert len(woken) == 1
+    assert faults.faults(10.0) == [('dobot', 'dobot alarm: LIMIT')]
+    watching(faults, 10.0, 10.9)
+    faults.joint_states(['dobot_j1'], 10.9)
+    watching(faults, 10.95, 11.5)
+    assert len(woken) == 2                              # the servo driver fell silent
+    assert faults.faults(11.5) == [('dobot', 'dobot alarm: LIMIT'), (
+        'servo', 'servo silent for 1.5 s (no joint states: driver stopped?)')]
+    assert faults.sentence(11.5, devices=('servo',)) == \
+        'servo silent for 1.5 s (no joint states: driver stopped?)'
+    faults.status('dobot', False, 'link reset', [])
+    assert faults.faults(11.5, devices=('dobot',)) == [
+        ('dobot', 'dobot not connected (link reset)')]
+    faults.status('dobot', True, '', [])                # cleared
+    assert faults.faults(11.5, devices=('dobot',)) == []
