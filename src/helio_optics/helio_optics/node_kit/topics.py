@@ -25,6 +25,8 @@ SUN_ESTIMATE = 'sun/estimate'
 PAINTER_HEARTBEAT = 'painter/heartbeat'
 # the lens planner's focal calibration (latched)
 FOCUS_CALIBRATION = 'calibration/focus'
+# the lens planner's heating and retreat distances, calibrated or not (latched)
+FOCUS_DISTANCES = 'focus/distances'
 # the simulated world's top view of the char map (tests, the report)
 SIM_CANVAS = 'sim/canvas'
 
