@@ -20,7 +20,7 @@ from conftest import graph_of_processes
 from geometry_msgs.msg import PoseStamped
 from helio_control.calibration_store import rig_description, save_calibration
 from helio_control.dot_size_calibration import DotSizeCalibration, save_dot_calibration
-from helio_msgs.msg import FocalCalibration
+from helio_msgs.msg import FocalCalibration, FocusDistances
 from helio_optics.config_files import config_path
 from helio_optics.geometry import PinholeCamera
 from helio_optics.node_kit.conversions import camera_info_from_camera, pose_to_matrix
@@ -98,6 +98,7 @@ def test_every_calibration_survives_a_restart_and_another_rigs_are_refused(tmp_p
         with started(tmp_path, run, rig_file, calibrations) as (_, graph):
             world = graph.collect(PoseStamped, 'calibration/world_pose', TRANSIENT_LOCAL_QOS)
             focus = graph.collect(FocalCalibration, 'calibration/focus', TRANSIENT_LOCAL_QOS)
+            distances = graph.collect(FocusDistances, 'focus/distances', TRANSIENT_LOCAL_QOS)
             build = graph.collect(String, 'calibration/rig', TRANSIENT_LOCAL_QOS)
             published = yaml.safe_load(build.wait_for_count(1, 60.0)[0].data)
             assert published['arm.forearm'] == pytest.approx(BUILD['arm.forearm'])
@@ -111,6 +112,10 @@ def test_every_calibration_survives_a_restart_and_another_rigs_are_refused(tmp_p
                 WORLD['world_yaw'], abs=1e-9)
             assert focus.wait_for_count(1, 60.0)[0].heating_distance == pytest.approx(
                 HEATING_DISTANCE)
+            # the distances the painter plans with follow it: the retreat the paper's 3 cm on
+            said = distances.wait_for_count(1, 60.0)[-1]
+            assert (said.calibrated, said.heating_distance, said.retreat_distance) == (
+                True, pytest.approx(HEATING_DISTANCE), pytest.approx(HEATING_DISTANCE + 0.03))
             # the painter reads the dot size back (and again at each goal)
             graph.wait_until(lambda: 'dot-size calibration read back' in log_of(
                 tmp_path, run, 'painter'), 60.0, 'the painter reading dots.yaml')
@@ -135,6 +140,7 @@ def test_every_calibration_survives_a_restart_and_another_rigs_are_refused(tmp_p
         stream.write('# j2 link measured again\n')
     with started(tmp_path, 'edited', rig_file, calibrations) as (group, graph):
         focus = graph.collect(FocalCalibration, 'calibration/focus', TRANSIENT_LOCAL_QOS)
+        distances = graph.collect(FocusDistances, 'focus/distances', TRANSIENT_LOCAL_QOS)
         world = graph.collect(PoseStamped, 'calibration/world_pose', TRANSIENT_LOCAL_QOS)
         build = graph.collect(String, 'calibration/rig', TRANSIENT_LOCAL_QOS)
         graph.wait_until(lambda: 'lens_planner: rig from' in log_of(
@@ -147,4 +153,8 @@ def test_every_calibration_survives_a_restart_and_another_rigs_are_refused(tmp_p
         assert 'was made for rig description' in log_of(tmp_path, 'edited', 'painter')
         with pytest.raises(GraphTimeout):
             focus.wait_for_count(1, 3.0)
+        # no focal calibration: the lens planner's parameter, the paper's 8.2 and 11.2 cm
+        said = distances.wait_for_count(1, 60.0)[-1]
+        assert (said.calibrated, said.heating_distance, said.retreat_distance) == (
+            False, pytest.approx(0.082), pytest.approx(0.112))
         assert world.messages == [] and build.messages == []

@@ -29,6 +29,13 @@ from dataclasses import dataclass
 from helio_optics.geometry import invert_transform, transform_points, unit
 import numpy as np
 
+# The paper's distances along the sun ray (Sec. IV-B): a dot is heated at d_lp = 8.2 cm (the
+# smallest spot of its focal calibration, Sec. V-A), and the lens retreats by delta d_lp =
+# 3 cm after it. The lens planner owns both (``lens_planner_parameters``: these are its
+# defaults; a focal calibration moves the first, issue 32); the offline plans take them too.
+HEATING_DISTANCE = 0.082
+RETREAT_OFFSET = 0.03
+
 
 class MovePlanningError(ValueError):
     """No safe sequence of moves reaches the goal; the message says why."""

@@ -17,6 +17,9 @@ procedure of ``helio_control.procedures`` run against this node's side of their 
 - ``calibrate_focus`` (CalibrateFocus, Sec. V-A): ``procedures.focal_calibration_run``; the
   heating distance published on ``calibration/focus`` (transient local) and saved.
 
+It alone owns the heating distance and the retreat distance (``procedures.focus``: issue
+32), latched on ``focus/distances`` at the start and after each focal calibration.
+
 Every goal is checked first: no sun estimate, a non-finite or unreachable target (which
 joint, by how much), no joint states: the goal is aborted at once with the reason. A cancel
 cancels the driver goals (the drivers stop the arm and hold the servos) and ends the goal.
@@ -46,7 +49,8 @@ from helio_control.procedures.sun_sweep_run import sweep_sun
 from helio_control.procedures.world_calibration_run import calibrate_world
 from helio_msgs.action import (CalibrateFocus, CalibrateRig, CalibrateWorld, FocusLens,
                                MoveArm, MoveWrist, SweepSun)
-from helio_msgs.msg import FocalCalibration, SpotObservation, SunEstimate
+from helio_msgs.msg import FocalCalibration, FocusDistances, SpotObservation
+from helio_msgs.msg import SunEstimate
 from helio_msgs.srv import EstimateSun
 from helio_optics.focus_targeting import FocusTargeting
 from helio_optics.node_kit import topics
@@ -85,6 +89,7 @@ class LensPlannerNode(Node):
         self.lens, lens_file = declare_lens(self)
         self.site, _ = declare_site(self)
         self.heating_distance = declare_heating_distance(self)
+        self.focus_calibrated = False       # heating_distance a focal calibration's
         self.settings = declare_settings(self)
         self.server_timeout = declare(
             self, 'server_timeout', 30.0,
@@ -168,6 +173,8 @@ class LensPlannerNode(Node):
                                                      LATCHED)
         self.focus_publisher = self.create_publisher(FocalCalibration, topics.FOCUS_CALIBRATION,
                                                      LATCHED)
+        self.distances_publisher = self.create_publisher(FocusDistances, topics.FOCUS_DISTANCES,
+                                                         LATCHED)
         self.rig_publisher = self.create_publisher(String, RIG_CALIBRATION_TOPIC, LATCHED)
         self.lease = declare_lease(
             self, 'lease', topics.PAINTER_HEARTBEAT,
@@ -203,9 +210,10 @@ class LensPlannerNode(Node):
                          cancel_callback=self._on_cancel)
         if load_calibrations:
             self._load_calibrations()
+        heating, retreat = self.publish_distances()   # (calibrated or not)
         self.get_logger().info(f'lens_planner: rig from {rig_file}, lens from {lens_file}; '
-                               f'heating {self.heating_distance * 100:.1f} cm, travel '
-                               f'{self.settings.travel_distance * 100:.1f} cm')
+                               f'heating {heating * 100:.1f} cm, retreat and travel '
+                               f'{retreat * 100:.1f} cm')
 
     # ---- inputs -----------------------------------------------------------------------------
 
@@ -270,6 +278,17 @@ class LensPlannerNode(Node):
                                    fit_rms_relative=fit_rms_relative, samples=samples)
         message.header.stamp = self.get_clock().now().to_msg()
         self.focus_publisher.publish(message)
+        self.focus_calibrated = True
+        self.publish_distances()
+
+    def publish_distances(self):
+        """Publish the heating and retreat distances on focus/distances; return them [m]."""
+        heating, retreat = focus.distances(self)
+        message = FocusDistances(heating_distance=heating, retreat_distance=retreat,
+                                 calibrated=self.focus_calibrated)
+        message.header.stamp = self.get_clock().now().to_msg()
+        self.distances_publisher.publish(message)
+        return heating, retreat
 
     def save(self, name, tree, notes=None):
         """Save a calibration under `name` in calibration_dir; return its path."""

@@ -11,6 +11,7 @@ import math
 from types import SimpleNamespace
 
 from helio_control import sun_sweep
+from helio_control.lens_moves import HEATING_DISTANCE, RETREAT_OFFSET
 from helio_control.procedures.lens_rig_port import LensPlannerSettings
 from helio_optics.node_kit.parameters import declare
 
@@ -18,17 +19,19 @@ from helio_optics.node_kit.parameters import declare
 def declare_heating_distance(node):
     """Declare heating_distance [m] (until a focal calibration says otherwise)."""
     return declare(
-        node, 'heating_distance', 0.082,
-        'd_lp at which a dot is heated until the focal calibration says otherwise '
-        '(paper: 8.2 cm) [m].', 0.02, 0.3)
+        node, 'heating_distance', HEATING_DISTANCE,
+        'd_lp at which a dot is heated until the focal calibration (calibration/focus) says '
+        'otherwise (paper: 8.2 cm); FocusLens goals ask for it as HEATING [m].', 0.02, 0.3)
 
 
 def declare_settings(node):
     """Declare the procedures' parameters on `node`; return them as LensPlannerSettings."""
-    travel_distance = declare(
-        node, 'travel_distance', 0.112,
-        "d_lp at which the lens travels between points (heating distance + the paper's "
-        'retreat of 3 cm), so the focus never sweeps the wood [m].', 0.02, 0.4)
+    retreat_offset = declare(
+        node, 'retreat_offset', RETREAT_OFFSET,
+        "The retreat distance lies this far beyond the heating distance (the paper's delta "
+        'd_lp, 3 cm, Sec. IV-B): the lens retreats there after a dot (FocusLens RETREAT) and '
+        'travels there between points, so the focus never sweeps the wood; it follows a '
+        'focal calibration [m].', 0.005, 0.2)
     safe_margin = declare(
         node, 'safe_margin', 0.015,
         'The focus moves sideways only this far or farther from the heating distance '
@@ -93,7 +96,7 @@ def declare_settings(node):
                    declare(node, 'focal_calibration.step', 0.001,
                            'Step of the focal sweep (paper 0.1 cm) [m].', 1e-4, 0.05))
     return LensPlannerSettings(
-        travel_distance=travel_distance, safe_margin=safe_margin, same_point=same_point,
+        retreat_offset=retreat_offset, safe_margin=safe_margin, same_point=same_point,
         marker_side=marker_side, view_margin=view_margin, observe_frames=observe_frames,
         view_points=tuple(view_points), world_poses=world_poses,
         world_distance=world_distance, rig_poses=rig_poses, rig_spot_poses=rig_spot_poses,

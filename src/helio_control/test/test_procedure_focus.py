@@ -13,14 +13,17 @@ from helio_msgs.action import FocusLens
 import numpy as np
 import pytest
 
-SUN = sun_at(50.0, 230.0)   # the travel distance (11.2 cm) in reach over the targets
+SUN = sun_at(50.0, 230.0)   # the retreat distance (11.2 cm) in reach over the targets
+# the paper's distances (Sec. IV-B), independent of the code: heat at 8.2 cm, retreat 3 cm
+PAPER_HEATING, PAPER_RETREAT = 0.082, 0.082 + 0.03
 
 
-def goal(x, y, z=0.0, d_lp=0.0, travel=0.0, frame='world'):
+def goal(x, y, z=0.0, d_lp=0.0, travel=0.0, frame='world', distance=0, travel_offset=0.0):
     target = PointStamped()
     target.header.frame_id = frame
     target.point.x, target.point.y, target.point.z = x, y, z
-    return FocusLens.Goal(target=target, d_lp=d_lp, travel_d_lp=travel)
+    return FocusLens.Goal(target=target, d_lp=d_lp, travel_d_lp=travel, distance=distance,
+                          travel_offset=travel_offset)
 
 
 def distance_along_ray(rig, x, sun, T_robot_world):
@@ -54,19 +57,59 @@ def test_the_spot_lands_on_the_target_and_the_lens_travels_retreated(rig):
     assert rig.feedbacks and rig.feedbacks[0].distance_remaining > 0.0
 
 
-def test_a_second_point_moves_on_at_the_travel_distance(rig):
+def test_a_second_point_moves_on_at_the_retreat_distance(rig):
     run(focus.focus(rig, goal(0.06, 0.04), FocusLens.Result()))
     first = len(rig.moves)
     run(focus.focus(rig, goal(0.09, 0.07), FocusLens.Result()))
     assert np.linalg.norm(rig.true_spot_centre()[:2] - [0.09, 0.07]) < 3e-4
     T = rig.T_true_robot_world
     travel = [distance_along_ray(rig.true_rig, x, SUN, T) for x in rig.moves[first:-1]]
-    assert travel and min(travel) >= 0.082 + 0.015 - 1e-4
+    assert travel and travel[0] == pytest.approx(PAPER_RETREAT, abs=1e-3)
+    assert min(travel) >= 0.082 + 0.015 - 1e-4
 
 
-def test_a_focus_at_the_travel_distance_leaves_the_lens_not_heating(rig):
+def test_a_focus_at_the_retreat_distance_leaves_the_lens_not_heating(rig):
     run(focus.focus(rig, goal(0.06, 0.04, d_lp=0.112), FocusLens.Result()))
     assert rig.placed_at == (False, False)
+
+
+@pytest.mark.parametrize('distance, d_lp, heating', [
+    (FocusLens.Goal.HEATING, 0.0, True), (FocusLens.Goal.RETREAT, 0.0, False),
+    (FocusLens.Goal.HEATING, 0.2, True),            # a named distance: d_lp is not read
+    (FocusLens.Goal.AT_D_LP, 0.0, True)])           # d_lp 0: the heating distance
+def test_a_goal_names_the_heating_or_the_retreat_distance(rig, distance, d_lp, heating):
+    run(focus.focus(rig, goal(0.06, 0.04, distance=distance, d_lp=d_lp), FocusLens.Result()))
+    reached = distance_along_ray(rig.true_rig, rig.x, SUN, rig.T_true_robot_world)
+    assert reached == pytest.approx(PAPER_HEATING if heating else PAPER_RETREAT, abs=1e-3)
+    assert rig.placed_at == (heating, False)
+
+
+def test_the_named_distances_follow_the_focal_calibration(rig):
+    # a focal calibration 3 mm beyond the paper's focus: the heating distance, the retreat
+    # distance and the travel between points all move with it
+    rig.use_focus(PAPER_HEATING + 0.003, 1e-6, 0.01, 21)
+    run(focus.focus(rig, goal(0.06, 0.04, distance=FocusLens.Goal.HEATING),
+                    FocusLens.Result()))
+    T = rig.T_true_robot_world
+    assert distance_along_ray(rig.true_rig, rig.x, SUN, T) == pytest.approx(0.085, abs=1e-3)
+    first = len(rig.moves)
+    run(focus.focus(rig, goal(0.09, 0.07, distance=FocusLens.Goal.HEATING),
+                    FocusLens.Result()))
+    assert distance_along_ray(rig.true_rig, rig.moves[first], SUN, T) == pytest.approx(
+        0.115, abs=1e-3)                           # retreated 3 cm beyond the new focus
+    run(focus.focus(rig, goal(0.09, 0.07, distance=FocusLens.Goal.RETREAT),
+                    FocusLens.Result()))
+    assert distance_along_ray(rig.true_rig, rig.x, SUN, T) == pytest.approx(0.115, abs=1e-3)
+
+
+def test_a_travel_offset_moves_the_focus_that_far_beyond_the_heating_distance(rig):
+    run(focus.focus(rig, goal(0.06, 0.04), FocusLens.Result()))
+    first = len(rig.moves)
+    run(focus.focus(rig, goal(0.09, 0.07, distance=FocusLens.Goal.HEATING,
+                              travel_offset=0.015), FocusLens.Result()))
+    T = rig.T_true_robot_world
+    travel = [distance_along_ray(rig.true_rig, x, SUN, T) for x in rig.moves[first:-1]]
+    assert travel and travel[0] == pytest.approx(PAPER_HEATING + 0.015, abs=1e-3)
 
 
 @pytest.mark.parametrize('bad, words', [
@@ -75,6 +118,8 @@ def test_a_focus_at_the_travel_distance_leaves_the_lens_not_heating(rig):
     (goal(0.06, 0.04, z=0.01), 'off the panel'),
     (goal(0.06, 0.04, d_lp=-0.01), 'd_lp must be a finite distance'),
     (goal(0.06, 0.04, travel=0.09), 'safe_margin'),
+    (goal(0.06, 0.04, travel_offset=0.008), 'travel_offset 0.008 m: .*safe_margin'),
+    (goal(0.06, 0.04, distance=3), 'distance 3: give AT_D_LP'),
 ])
 def test_a_bad_goal_fails_before_any_move(rig, bad, words):
     with pytest.raises(GoalFailed, match=words):
@@ -96,7 +141,7 @@ def test_a_cancel_ends_the_focus_and_the_lens_is_not_said_placed():
     assert len(rig.moves) == 1 and rig.placed_at is None
 
 
-def test_the_retreat_lifts_the_focus_along_the_ray_to_the_travel_distance(rig):
+def test_the_retreat_lifts_the_focus_along_the_ray_to_the_retreat_distance(rig):
     run(focus.focus(rig, goal(0.06, 0.04), FocusLens.Result()))
     run(focus.retreat(rig))
     T = rig.T_true_robot_world

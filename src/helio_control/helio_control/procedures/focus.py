@@ -4,8 +4,15 @@ The focus procedure (paper Eqs 14-15): the lens placed so the sun's focus lands 
 The lens pose comes from the sun estimate, corrected so the spot's power centre (not only
 the lens axis) lands on the target (``FocusTargeting``); the five joints by the rig's inverse
 kinematics; the moves in legs that keep the focus off the wood while it travels
-(``lens_moves``: retreat, travel at the travel distance, approach). Also the retreat of a
+(``lens_moves``: retreat, travel at the retreat distance, approach). Also the retreat of a
 lens left at the heating distance (the lens planner's lease and its interrupt).
+
+The distances along the sun ray have one owner, the lens planner (issue 32): the heating
+distance is its focal calibration's (``port.heating_distance``: calibration/focus, else its
+``heating_distance`` parameter, the paper's 8.2 cm), the retreat distance that plus
+``retreat_offset`` (the paper's delta d_lp, 3 cm, Sec. IV-B), so both follow a calibration.
+A goal asks for either by name (``FocusLens.Goal.distance``: ``HEATING``, ``RETREAT``);
+``d_lp`` gives one explicitly.
 """
 
 import math
@@ -17,6 +24,11 @@ from helio_msgs.msg import LensPose
 from helio_optics.node_kit.conversions import array_to_point, point_to_array
 from helio_optics.node_kit.conversions import stamp_from_seconds
 import numpy as np
+
+
+def distances(port):
+    """Return (heating, retreat distance) [m] of a port (or any holder of both inputs)."""
+    return port.heating_distance, port.heating_distance + port.settings.retreat_offset
 
 
 def check_goal(port, goal):
@@ -32,15 +44,30 @@ def check_goal(port, goal):
     if abs(target[2]) > 1e-6:
         raise GoalFailed(f'the target lies {target[2] * 1000:.1f} mm off the panel (z must '
                          'be 0 in the world frame)')
-    d_lp = goal.d_lp if goal.d_lp != 0.0 else port.heating_distance
+    heating, retreat = distances(port)
+    if goal.distance == FocusLens.Goal.HEATING:
+        d_lp = heating
+    elif goal.distance == FocusLens.Goal.RETREAT:
+        d_lp = retreat
+    elif goal.distance == FocusLens.Goal.AT_D_LP:
+        d_lp = goal.d_lp if goal.d_lp != 0.0 else heating
+    else:
+        raise GoalFailed(f'distance {goal.distance}: give AT_D_LP (0, the d_lp field), HEATING '
+                         '(1) or RETREAT (2)')
     if not (math.isfinite(d_lp) and d_lp > 0.0):
         raise GoalFailed(f'd_lp must be a finite distance > 0 m, got {goal.d_lp}')
-    travel = goal.travel_d_lp if goal.travel_d_lp != 0.0 else settings.travel_distance
+    if goal.travel_d_lp != 0.0:
+        travel, asked = goal.travel_d_lp, f'travel_d_lp {goal.travel_d_lp} m'
+    elif goal.travel_offset != 0.0:
+        travel = heating + goal.travel_offset
+        asked = f'travel_offset {goal.travel_offset} m'
+    else:
+        travel, asked = retreat, 'the retreat distance'
     if not (math.isfinite(travel) and lens_moves.safe_to_travel_at(
-            travel, port.heating_distance, settings.safe_margin)):
-        raise GoalFailed(f'travel_d_lp {goal.travel_d_lp} m: the focus may move sideways '
-                         f'only {settings.safe_margin * 100:.1f} cm or more from the heating '
-                         f'distance {port.heating_distance * 100:.1f} cm (safe_margin)')
+            travel, heating, settings.safe_margin)):
+        raise GoalFailed(f'{asked}: the focus may move sideways only '
+                         f'{settings.safe_margin * 100:.1f} cm or more from the heating '
+                         f'distance {heating * 100:.1f} cm (safe_margin)')
     return target, d_lp, travel
 
 
@@ -48,16 +75,17 @@ def plan_focus(port, target, d_lp, travel=None):
     """
     Return (legs, present joints) that bring the focus to `target` at `d_lp`.
 
-    The focus moves sideways at `travel` (default the travel distance), else at the first
+    The focus moves sideways at `travel` (default the retreat distance), else at the first
     reachable distance a safe margin from the heating distance.
     """
-    settings, heating = port.settings, port.heating_distance
+    settings = port.settings
+    heating, retreat = distances(port)
     sun = port.sun_ray()
     x_now = port.present_joints()
     try:
         legs = lens_moves.plan_focus_moves(
             port.targeting, x_now, target, d_lp, sun, port.rig.parameters.T_robot_world,
-            heating, (travel or settings.travel_distance, heating + settings.safe_margin,
+            heating, (travel or retreat, heating + settings.safe_margin,
                       heating - settings.safe_margin),
             settings.safe_margin, settings.same_point)
     except (lens_moves.MovePlanningError, ValueError) as error:
@@ -119,12 +147,12 @@ async def focus(port, goal, result):
 
 
 async def retreat(port):
-    """Move the lens along the sun ray to the travel distance over where it focuses now."""
+    """Move the lens along the sun ray to the retreat distance over where it focuses now."""
     x_now = port.present_joints()
     here, _ = lens_moves.focus_point(port.rig, x_now, port.sun_ray(),
                                      port.rig.parameters.T_robot_world)
     if here is None:
         raise GoalFailed('the lens does not face the panel: nothing to retreat')
-    legs, _ = plan_focus(port, here, port.settings.travel_distance)
+    legs, _ = plan_focus(port, here, distances(port)[1])
     for leg in legs:
         await port.move(leg.x)

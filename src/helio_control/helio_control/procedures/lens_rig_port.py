@@ -33,7 +33,7 @@ class LensPlannerSettings:
     ``lens_planner_parameters.declare_settings``.
     """
 
-    travel_distance: float       # d_lp of the travel between points [m]
+    retreat_offset: float        # the retreat (and travel) d_lp beyond the heating d_lp [m]
     safe_margin: float           # sideways moves this far or farther from the heating d_lp [m]
     same_point: float            # a focus shift below this goes straight along the ray [m]
     marker_side: float           # the ArUco marker's black square [m]
