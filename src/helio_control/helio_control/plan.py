@@ -31,6 +31,7 @@ from helio_control.dot_layout import check_reach, grid_for_picture, outside_canv
 from helio_control.features import cell_means, extract_features, FEATURE_MODES, LINE_MODES
 from helio_control.features import working_image
 from helio_control.halftone import KERNELS
+from helio_control.lens_moves import HEATING_DISTANCE, RETREAT_OFFSET
 from helio_control.path_ordering import order_dots, ORDERINGS, TravelMetric
 from helio_control.picture_input import load_picture
 from helio_control.quality import chamfer_mm, ssim_of_dots
@@ -79,8 +80,8 @@ class PlanOptions:
     tone_gamma: float = 1.0
     tone_dot_size: bool = False
     n_p_min: int = 15
-    d_lp: float = 0.082
-    retreat: float = 0.03
+    d_lp: float = HEATING_DISTANCE      # the lens planner's defaults (it owns both)
+    retreat: float = RETREAT_OFFSET
     solver_budget_s: float = 0.0
     min_separation: float = 0.0
     cooling_wait: bool = True

@@ -93,8 +93,9 @@ class SkySettings:
     """
     What the sun must serve and how the lens planner finds it; SI units, degrees as named.
 
-    Canvas and distances: picture.yaml's (``canvas_size``, ``offset_x``, ``offset_y``,
-    ``d_lp``, ``retreat``). Sweep: the lens planner's defaults (lens_planner.yaml:
+    Canvas: picture.yaml's (``canvas_size``, ``offset_x``, ``offset_y``); distances
+    (``d_lp``, ``retreat``): the lens planner's defaults, which it owns. Sweep: the lens
+    planner's defaults (lens_planner.yaml:
     ``marker_side``, ``view_margin``, ``panel_extent``, ``view_spacing``,
     ``marker_clearance``, ``sweep.tilts_deg``, ``sweep.distances``; the spot search's
     distances are d_lp plus ``acquisition_offsets``, its tilts ``acquisition_tilts_deg``,
