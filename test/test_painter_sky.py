@@ -3,6 +3,8 @@ The painter refuses a goal the sun cannot serve, naming ``helio sky`` (issue 30,
 
 The painter node runs in this process on a simulated clock (``/clock`` published here at a
 chosen instant), with no lens planner: a refused goal must end before any action is sent.
+The lens planner's distances (``focus/distances``, which the painter checks reach at) are
+published here as the lens planner publishes them, at the paper's 8.2 and 11.2 cm.
 Its reasons come from ``helio_control.sky`` (tested in src/helio_control/test/test_sky.py);
 here the node is held to the world's truths: the sun's elevation from pysolar at the site,
 the sun ray of the simulated world's own ``Sun`` at a robot heading, and the rig model.
@@ -16,7 +18,7 @@ from helio_control.dot_layout import check_reach
 from helio_control.painter_node import PainterNode
 from helio_drivers.sim.sun import Sun
 from helio_msgs.action import PaintPattern
-from helio_msgs.msg import SunEstimate
+from helio_msgs.msg import FocusDistances, SunEstimate
 from helio_optics.ephemeris import Site, sun_position
 from helio_optics.node_kit.conversions import stamp_from_seconds
 from helio_optics.node_kit.in_process_graph import InProcessGraph, TRANSIENT_LOCAL_QOS
@@ -52,6 +54,9 @@ class PainterAt:
         graph.helper.create_timer(0.02, lambda: self.clock.publish(Clock(clock=stamp)))
         self.estimates = graph.helper.create_publisher(SunEstimate, 'sun/estimate',
                                                        TRANSIENT_LOCAL_QOS)
+        self.distances = graph.helper.create_publisher(FocusDistances, 'focus/distances',
+                                                       TRANSIENT_LOCAL_QOS)
+        self.distances.publish(FocusDistances(heating_distance=0.082, retreat_distance=0.112))
         self.node = graph.add(PainterNode(**graph.node_options(
             use_sim_time=True, site_file=site_file(tmp_path), calibrate_world='never',
             runs_dir=str(tmp_path / 'runs'))))

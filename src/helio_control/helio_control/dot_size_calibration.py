@@ -243,6 +243,17 @@ def dot_size_for_painting(directory, rig_file):
         return None, f'dot-size calibration not used: {error}'
 
 
+def painting_note(directory, rig_file):
+    """Return (what a painting will size its dots by, whether that is a warning)."""
+    calibration, note = dot_size_for_painting(directory, rig_file)
+    if note:
+        return note, True
+    if calibration is None:
+        return (f"no dot-size calibration in {directory}: dots are sized by the goal's N_p "
+                'target'), False
+    return f'dot-size calibration read back from {directory}: {calibration.summary()[0]}', False
+
+
 # the test row's defaults: on the margin 1 cm above the default canvas (0.05-0.13 m), dots
 # 5 mm apart so that the widest (~2.7 mm) stay apart. Not between the marker and the canvas:
 # at y 0.04 the simulated world's N_p stops at 13 (measured with its true focus)

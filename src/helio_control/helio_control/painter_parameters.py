@@ -4,8 +4,9 @@ The painter node's parameters, declared on the node and handed to the procedures
 ``declare_painter_parameters(node)`` declares every parameter of ``painter`` (with its
 descriptor: description, range, choices; ``helio_optics.node_kit.parameters``) and returns
 their values as the ``PainterSettings`` the painting run and the dot procedure read. The node
-keeps that object up to date: the focal calibration's heating distance, and the parameters
-declared ``dynamic`` when they are set at run time (``DYNAMIC``).
+keeps that object up to date: the parameters declared ``dynamic`` when they are set at run
+time (``DYNAMIC``). The heating and retreat distances are not the painter's: the lens
+planner owns them (issue 32; ``lens_planner_parameters``).
 No rclpy import: it takes the node.
 """
 
@@ -36,14 +37,6 @@ def declare_painter_parameters(node):
             node, 'sky.reach_spacing', 0.01,
             "Spacing of the grid over a picture goal's canvas that must have a point within "
             'reach of the sun estimate, or the goal is refused [m].', 0.001, 0.1),
-        heating_distance=declare(
-            node, 'heating_distance', 0.082,
-            'd_lp of a dot until a focal calibration arrives on calibration/focus (paper: '
-            '8.2 cm) [m].', 0.02, 0.3),
-        retreat_offset=declare(
-            node, 'retreat_offset', 0.03,
-            "Retreat delta d_lp after a dot (the paper's 3 cm) [m].",
-            0.005, 0.2),
         cooling=declare(
             node, 'cooling', 'paper',
             "Before the next dot: 'paper' waits until N_p is 0; 'window' "
@@ -61,10 +54,11 @@ def declare_painter_parameters(node):
             "the paper's rule does [m].", 0.0, 0.1),
         window_travel_offset=declare(
             node, 'window_travel_offset', 0.015,
-            'Window rule: between dots the focus moves sideways this far beyond the heating '
-            "distance instead of at the lens planner's travel_distance (the paper's retreat, "
-            "which the window rule does not wait at); 1.5 cm puts 9 % of the heating peak's "
-            'irradiance on the wood (simulated lens) [m].', 0.0, 0.2),
+            'Window rule: between dots the focus moves sideways this far beyond the lens '
+            "planner's heating distance (FocusLens travel_offset) instead of at its retreat "
+            "distance (the paper's, which the window rule does not wait at); 0: at the "
+            "retreat distance. 1.5 cm puts 9 % of the heating peak's irradiance on the wood "
+            '(simulated lens) [m].', 0.0, 0.2),
         max_heating=declare(
             node, 'max_heating', 90.0,
             'A dot held longer than this is given up (set at run time: '

@@ -13,7 +13,10 @@ Time is simulated and jumps (nothing sleeps): the node clock and the wall clock 
 model clock, started at a Unix instant. Thermal frames come every ``FRAME`` seconds, except
 in the intervals the test takes the stream down (none then) or freezes it (the last live
 frame again, ``frozen``); a focus move takes ``MOVE`` seconds in which the focus is on no
-dot. A cancel, a device fault or the sun's return happen at times the test sets. The model
+dot. The lens planner is modelled as far as the painter sees it: it owns the heating and
+retreat distances (``heating_distance``, ``retreat_offset``: its shipped defaults, which a
+test may change as a focal calibration would) and resolves a focus goal's HEAT or RETREAT to
+them. A cancel, a device fault or the sun's return happen at times the test sets. The model
 records what the tests judge by: the intervals in which the focus rested on the wood at the
 heating distance (``heatings``), every thermal frame delivered, the escapes.
 
@@ -26,7 +29,9 @@ import math
 from types import SimpleNamespace
 
 from fake_lens_rig import run  # noqa: F401 (the procedures' tests drive them with it)
-from helio_control.procedures.painter_port import PainterRigPort, PainterSettings
+from helio_control.lens_planner_parameters import HEATING_DISTANCE, RETREAT_OFFSET
+from helio_control.procedures.painter_port import HEAT, PainterRigPort, PainterSettings
+from helio_control.procedures.painter_port import RETREAT
 from helio_optics.ephemeris import Site
 from helio_optics.geometry import unit
 from helio_optics.rig_kinematics import Rig
@@ -104,6 +109,8 @@ class RigModel(PainterRigPort):
     def __init__(self, settings):
         """Start at START with the focus on nothing, the sun out and a converged estimate."""
         self.settings = settings
+        self.heating_distance = HEATING_DISTANCE    # the lens planner's [m]
+        self.retreat_offset = RETREAT_OFFSET        # the lens planner's [m]
         self.wood = Wood()
         self.rig = Rig()
         self.t = 0.0                   # model time since START [s]
@@ -124,7 +131,8 @@ class RigModel(PainterRigPort):
         self.sun = (SUN, START)
         self.heatings = []             # [target, since, until] of the focus on the wood
         self.frames = []               # (time, the wood's N_p of each dot) of every frame
-        self.moves = []                # (time, target, d_lp, travel d_lp, urgent) of each focus
+        self.moves = []                # (time, target, d_lp, travel d_lp or 0, urgent) of each
+        #                                focus, at the distances the lens planner resolved
         self.escapes = []              # (time, 'wrist' or 'arm')
         self.feedback = []
         self.windows = []
@@ -150,8 +158,7 @@ class RigModel(PainterRigPort):
             for target in self.rise:
                 gain = 0.0
                 if self.lens is not None and self.lens[0] == target:
-                    gain = self.wood.concentration(self.lens[1]
-                                                   - self.settings.heating_distance)
+                    gain = self.wood.concentration(self.lens[1] - self.heating_distance)
                 settled = self.wood.rise * power * gain
                 self.rise[target] = settled + (self.rise[target] - settled) * math.exp(
                     -dt / self.wood.tau)
@@ -169,7 +176,7 @@ class RigModel(PainterRigPort):
         self.lens = None if target is None else (tuple(float(v) for v in target), d_lp)
         if self.lens is not None:
             self.rise.setdefault(self.lens[0], 0.0)
-            if abs(d_lp - self.settings.heating_distance) < 1e-6:
+            if abs(d_lp - self.heating_distance) < 1e-6:
                 self.heatings.append([self.lens[0], self.t, None])
                 if self.cancel_in_heating and self.cancel_in_heating[0] == len(self.heatings):
                     self.cancel_at = self.t + self.cancel_in_heating[1]
@@ -250,7 +257,13 @@ class RigModel(PainterRigPort):
             faults.append(('servo', 'servo alarm: overload'))
         return faults
 
-    async def focus(self, target, d_lp, travel_d_lp=0.0, urgent=False):
+    def focus_distances(self):
+        return self.heating_distance, self.heating_distance + self.retreat_offset
+
+    async def focus(self, target, at, travel_offset=0.0, urgent=False):
+        heating, retreat = self.focus_distances()        # the lens planner resolves them
+        d_lp = {HEAT: heating, RETREAT: retreat}[at]
+        travel_d_lp = heating + travel_offset if travel_offset else 0.0
         self.moves.append((self.t, tuple(target), d_lp, travel_d_lp, urgent))
         self._place(None, 0.0)
         self.advance(MOVE)

@@ -113,8 +113,7 @@ def test_a_thermal_stream_that_does_not_come_back_ends_the_painting_retreated(tm
         heat(procedure)
     [(since, until)] = model.heated(TARGET)
     assert until <= 2.0 + model.settings.thermal_stale
-    assert model.lens[1] == pytest.approx(model.settings.heating_distance
-                                          + model.settings.retreat_offset)
+    assert model.lens[1] == pytest.approx(model.heating_distance + model.retreat_offset)
     assert procedure.at_heating is None
 
 
@@ -190,7 +189,8 @@ def test_a_cancel_while_heating_ends_the_dot_at_once(tmp_path):
     model.cancel_at = 2.0
     with pytest.raises(PaintCanceled):
         heat(procedure)
-    assert procedure.at_heating == (pytest.approx(TARGET), model.settings.heating_distance)
+    assert procedure.at_heating == pytest.approx(TARGET)
+    assert model.lens == (pytest.approx(TARGET), model.heating_distance)
     assert run(procedure.retreat('cancel')) == 'retreated (cancel)'
     [(since, until)] = model.heated(TARGET)
     assert until == pytest.approx(2.0) and model.moves[-1][4]      # the urgent retreat

@@ -8,6 +8,7 @@ dots the focus rested on, and when) and the journal as read back.
 """
 
 from geometry_msgs.msg import Point
+from helio_control.plan import Plan
 from helio_control.procedures.painting_run import PaintingRun
 from helio_control.run_journal import read_journal
 from helio_msgs.action import PaintPattern
@@ -61,7 +62,7 @@ def test_a_cancel_while_heating_retreats_the_lens_and_ends_the_goal_canceled(tmp
     assert until == pytest.approx(3.0)                     # woken at the cancel
     at, where, d_lp, _, urgent = model.moves[-1]
     assert urgent and where == pytest.approx(ROW[0]) and d_lp == pytest.approx(
-        model.settings.heating_distance + model.settings.retreat_offset)
+        model.heating_distance + model.retreat_offset)
     assert model.t == pytest.approx(3.0 + MOVE)
     journal = read_journal(str(run_dir / 'journal.jsonl'))
     assert journal.dots == [] and journal.result.message == result.message
@@ -71,13 +72,12 @@ def test_the_window_rule_goes_on_at_once_and_retreats_after_the_last_dot(tmp_pat
     result, ending, model = paint(tmp_path, goal_of(ROW, tmp_path / 'runs' / 'window',
                                                     cooling='window'))
     assert ending == 'succeed' and result.dots_burnt == 4, result.message
-    settings = model.settings
-    heat, travel = settings.heating_distance, settings.window_travel_offset
+    heat, travel = model.heating_distance, model.settings.window_travel_offset
     # one focus goal per dot, travelling beyond the heating distance; no retreat between
     # the dots, one after the last
     assert [move[1:] for move in model.moves] == [
         (pytest.approx(target), heat, pytest.approx(heat + travel), False) for target in ROW
-    ] + [(pytest.approx(ROW[-1]), pytest.approx(heat + settings.retreat_offset), 0.0, True)]
+    ] + [(pytest.approx(ROW[-1]), pytest.approx(heat + model.retreat_offset), 0.0, True)]
     heatings = [model.heated(target) for target in ROW]
     assert [len(intervals) for intervals in heatings] == [1, 1, 1, 1]
     for (_, until), [(since, _)] in zip([h[0] for h in heatings], heatings[1:]):
@@ -90,12 +90,11 @@ def test_the_window_rule_waits_for_a_cool_window_when_the_next_dot_lies_in_the_h
     result, ending, model = paint(tmp_path, goal_of(close, tmp_path / 'runs' / 'close',
                                                     cooling='window'))
     assert ending == 'succeed' and result.dots_burnt == 2, result.message
-    settings = model.settings
+    heat = model.heating_distance
     # the first dot retreats (no urgency: the plain retreat of Algorithm 1) ...
     assert [move[2:] for move in model.moves[:2]] == [
-        (settings.heating_distance, pytest.approx(settings.heating_distance
-                                                  + settings.window_travel_offset), False),
-        (pytest.approx(settings.heating_distance + settings.retreat_offset), 0.0, False)]
+        (heat, pytest.approx(heat + model.settings.window_travel_offset), False),
+        (pytest.approx(heat + model.retreat_offset), 0.0, False)]
     # ... and the second heats only once the first shows no N_p in its window
     [(_, until)], [(since, _)] = model.heated(close[0]), model.heated(close[1])
     last_look = max((t, n_p) for t, n_p in model.frames if until < t < since)
@@ -113,7 +112,7 @@ def test_a_stop_signal_or_a_fault_while_heating_takes_the_focus_off_and_aborts(
     assert (got, result.message) == (ending, message)
     [(since, until)] = model.heated(ROW[0])
     assert until == pytest.approx(3.0)                     # woken at once
-    assert model.lens is None or model.lens[1] > model.settings.heating_distance
+    assert model.lens is None or model.lens[1] > model.heating_distance
 
 
 def test_the_emergency_stop_ends_the_goal_and_moves_nothing_more(tmp_path):
@@ -159,4 +158,28 @@ def test_start_index_skips_the_dots_before_it(tmp_path):
 def test_a_bad_goal_is_refused_before_anything_moves(tmp_path, fields, words):
     result, ending, model = paint(tmp_path, goal_of(ROW, tmp_path / 'runs' / 'bad', **fields))
     assert ending == 'abort' and words in result.message
+    assert model.moves == [] and model.heatings == []
+
+
+def test_the_painting_heats_retreats_and_plans_at_the_lens_planners_distances(tmp_path):
+    # the lens planner's focal calibration put the focus 3 mm beyond the paper's 8.2 cm: the
+    # painter never names a distance, and plans at the ones the lens planner published
+    run_dir = tmp_path / 'runs' / 'calibrated'
+    result, ending, model = paint(tmp_path, goal_of(ROW, run_dir), heating_distance=0.085)
+    assert ending == 'succeed' and result.dots_burnt == 4, result.message
+    assert [len(model.heated(target)) for target in ROW] == [1, 1, 1, 1]
+    assert sorted({round(move[2], 9) for move in model.moves}) == pytest.approx(
+        [0.085, 0.085 + 0.03])                         # heated there, retreated 3 cm beyond
+    plan = Plan.from_json((run_dir / 'plan.json').read_text())
+    assert plan.parameters['d_lp'] == pytest.approx(0.085)
+    assert plan.parameters['retreat'] == pytest.approx(0.03)
+
+
+def test_without_the_lens_planners_distances_the_goal_fails_before_any_move(tmp_path):
+    model = RigModel(settings(tmp_path))
+    model.focus_distances = lambda: None           # no lens planner has said them
+    result, ending = run(PaintingRun(model, model.settings).execute(
+        goal_of(ROW, tmp_path / 'runs' / 'none')))
+    assert ending == 'abort' and not result.success
+    assert "the lens planner's distances (focus/distances) is not available" in result.message
     assert model.moves == [] and model.heatings == []

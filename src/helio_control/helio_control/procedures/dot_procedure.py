@@ -1,9 +1,9 @@
 """
 One dot of a painting: Algorithm 1 lines 6-14 with the painter's safety rules around it.
 
-Per dot (paper Sec. IV-B): ``focus`` at the heating distance (the focal calibration's, else
-the parameter); hold while N_p < the dot's target N_p* (``dot_cycle``, lines 6-9); retreat
-by delta d_lp (``retreat_offset``); with the paper's cooling rule wait until N_p is back to
+Per dot (paper Sec. IV-B): ``focus`` at the heating distance (``HEAT``); hold while N_p <
+the dot's target N_p* (``dot_cycle``, lines 6-9); retreat by delta d_lp, the paper's 3 cm
+(``RETREAT``); with the paper's cooling rule wait until N_p is back to
 0 (lines 10-13), with the ``window`` rule count N_p only within ``window_radius`` of the dot
 (``set_window``: the previous dot's afterglow does not count) and go on at once: the move to
 the next dot is one ``focus`` goal that starts with the retreat, so the arm does not stop in
@@ -19,7 +19,7 @@ Beyond the paper:
   ``thermal_stale_wall`` of wall time: the port's ``next_stats``), a dot held past
   ``max_heating``, a device fault or a cancel: the lens retreats at once. ``retreat`` takes
   the focus off the wood by the first way that works: the lens planner's retreat (``focus``
-  at the heating distance plus ``retreat_offset``, urgent); if the arm cannot move, the wrist
+  at ``RETREAT``, urgent); if the arm cannot move, the wrist
   turns the lens off the sun (``wrist_escape_pitch``, away from the pitch servo's nearer
   end); if the wrist cannot move, the arm alone lifts the lens straight up by
   ``arm_escape_lift`` (``rig_kinematics.escape_lift``); when no way works (both devices at
@@ -36,11 +36,14 @@ Beyond the paper:
   char at the target (``helio_perception.char_dots``); a dot burnt that it finds not charred
   is heated again, at most ``verify_reheats`` times, then counted as failed.
 
+The distances are the lens planner's (issue 32): it alone owns the heating distance (its
+focal calibration, else its parameter) and the retreat distance (that plus its
+``retreat_offset``); a dot asks to heat at a point or to retreat from it, never in metres.
 ``DotProcedure`` talks to the rig only through a ``PainterRigPort``. Pure Python: no rclpy.
 """
 
 from helio_control.dot_cycle import CycleSettings, Decision, DotCycle
-from helio_control.procedures.painter_port import PaintCanceled, PaintFailed
+from helio_control.procedures.painter_port import HEAT, PaintCanceled, PaintFailed, RETREAT
 from helio_optics.geometry import invert_transform
 from helio_optics.rig_kinematics import escape_lift, escape_pitch, JOINT_NAMES
 from helio_optics.rig_kinematics import UnreachableError
@@ -77,8 +80,8 @@ class DotProcedure:
     Burn, retreat from and check single dots through a port; see the module docstring.
 
     Per goal (``begin_goal``) it counts the heatings broken off by a stale thermal stream,
-    the time waited for the sun and the camera's looks. ``at_heating`` is (target, d_lp)
-    while the lens is focused on the wood, else None.
+    the time waited for the sun and the camera's looks. ``at_heating`` is the world target
+    (x, y) [m] the lens is focused on at the heating distance, else None.
     """
 
     def __init__(self, port, settings):
@@ -216,11 +219,10 @@ class DotProcedure:
                   'n_p_target': n_p_target, 'start': start, 'end': start, 'dwell': 0.0,
                   'peak_n_p': 0, 't_max': -273.15, 'outcome': 'burnt', 'reason': '',
                   'restarts': 0}
-        d_heat = settings.heating_distance
         if dry_run:
             feedback.phase = 'moving'
             port.publish_feedback(feedback)
-            moved = await port.focus(target, d_heat + settings.retreat_offset)
+            moved = await port.focus(target, RETREAT)
             record.update(end=port.now(), outcome='skipped' if moved.success else 'failed',
                           reason='dry run' if moved.success else moved.message)
             return record
@@ -234,14 +236,13 @@ class DotProcedure:
         while True:                                   # again after a cloud
             feedback.phase = 'moving'
             port.publish_feedback(feedback)
-            moved = await port.focus(target, d_heat,
-                                     (d_heat + travel) if window and travel > 0.0 else 0.0)
+            moved = await port.focus(target, HEAT, travel if window else 0.0)
             if not moved.success:
                 if self.at_heating is not None:       # the last dot's heating pose
                     port.get_logger().warning(await self.retreat('the move failed'))
                 record.update(end=port.now(), outcome='failed', reason=moved.message)
                 return record
-            self.at_heating = (target, d_heat)
+            self.at_heating = target
             cycle.start_heating(port.now())
             feedback.phase = 'heating'
             decision, stale, n_p, t_max, cap = await self._hold(
@@ -252,7 +253,7 @@ class DotProcedure:
                 # after the last dot, or when anything stops the painting, the run retreats
                 decision = cycle.update(port.now(), n_p, t_max, cap)
                 break
-            retreat = await port.focus(target, d_heat + settings.retreat_offset)
+            retreat = await port.focus(target, RETREAT)
             if not retreat.success:
                 raise PaintFailed(f'the retreat after dot {index} failed: {retreat.message}')
             self.at_heating = None
@@ -406,7 +407,7 @@ class DotProcedure:
         if self.at_heating is None:
             return 'the lens was not at the heating distance'
         port, settings = self.port, self.settings
-        target, d_lp = self.at_heating
+        target = self.at_heating
         faults = port.device_faults()
         arm_fault = next((sentence for device, sentence in faults if device == 'dobot'), None)
         wrist_fault = next((sentence for device, sentence in faults if device == 'servo'),
@@ -419,7 +420,7 @@ class DotProcedure:
             failure = arm_fault
         else:
             try:
-                result = await port.focus(target, d_lp + settings.retreat_offset, urgent=True)
+                result = await port.focus(target, RETREAT, urgent=True)
                 if result.success:
                     self.at_heating = None
                     return f'retreated ({why})'

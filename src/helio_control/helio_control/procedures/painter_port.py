@@ -16,9 +16,13 @@ sweep, a ``helio_msgs/SunEstimate``).
 """
 
 import abc
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 COOLING_RULES = ('paper', 'window')
+# Where along the sun ray a focus goal puts the lens: the lens planner owns both distances
+# (issue 32; helio_msgs/FocusLens ``HEATING``, ``RETREAT``), relative to its calibrated focus.
+HEAT = 'heating'         # at the heating distance, where a dot is burnt (paper 8.2 cm)
+RETREAT = 'retreat'      # at the retreat distance: delta d_lp beyond it (paper 3 cm, Sec. IV-B)
 
 
 class PaintFailed(Exception):
@@ -34,13 +38,12 @@ class PainterSettings:
     """
     The painter's parameters as the procedures read them (``painter_parameters`` declares).
 
-    Read live: the node sets ``heating_distance`` from the focal calibration, and the
-    dynamic parameters (``max_heating``, ``verify_min_diameter_ratio``) when they are set.
-    Units as the parameters': [m], [s], [rad].
+    Read live: the node sets the dynamic parameters (``max_heating``,
+    ``verify_min_diameter_ratio``) when they are set. Units as the parameters': [m], [s],
+    [rad]. The heating and retreat distances are not here: the lens planner owns them
+    (``PainterRigPort.focus_distances``).
     """
 
-    heating_distance: float
-    retreat_offset: float
     cooling: str
     window_radius: float
     window_separation: float
@@ -109,6 +112,51 @@ class PaintResult:
     time_estimated: float = 0.0  # [s]
     cloud_wait: float = 0.0      # [s]
     run_dir: str = ''
+
+
+def as_message(fields, message_type):
+    """Return a `message_type` of the dataclass `fields`, each of its field's Python type."""
+    blank = message_type()
+    return message_type(**{name: type(getattr(blank, name))(value)
+                           for name, value in asdict(fields).items()})
+
+
+class GoalStops:
+    """
+    The running paint goal, and what asks it to end: a port's bookkeeping of its endings.
+
+    ``cancel`` (the client's cancel) and ``stop`` (a stop signal, the emergency stop: only
+    while a goal runs) ask the painting to end and `wake` its heating loop at once (it may
+    wait for thermal statistics); ``requested``, ``signal`` and ``client_canceled`` answer
+    the port's ``cancel_requested``, ``stop_signal`` and ``client_canceled``.
+    """
+
+    def __init__(self, wake):
+        """Call `wake()` when the painting must end."""
+        self.wake = wake
+        self.busy = False
+        self.goal = None             # the running goal's handle (``is_cancel_requested``)
+        self.requested = False       # the painting must end
+        self.signal = ''             # why the node stops mid-painting ('' while it does not)
+
+    def begin(self, goal):
+        """Start the goal `goal` (its handle) afresh."""
+        self.busy, self.goal, self.requested, self.signal = True, goal, False, ''
+
+    def cancel(self):
+        """Take the client's cancel of the goal."""
+        self.requested = True
+        self.wake()
+
+    def stop(self, why):
+        """End a running painting because of `why` (a stop signal, the emergency stop)."""
+        if self.busy:
+            self.signal = why
+            self.cancel()
+
+    def client_canceled(self):
+        """Return whether the goal's client asked for the cancel."""
+        return self.goal is not None and self.goal.is_cancel_requested
 
 
 class PainterRigPort(abc.ABC):
@@ -191,13 +239,23 @@ class PainterRigPort(abc.ABC):
     # ---- moves ----------------------------------------------------------------------------
 
     @abc.abstractmethod
-    async def focus(self, target, d_lp, travel_d_lp=0.0, urgent=False):
+    def focus_distances(self):
         """
-        Focus the lens on world `target` (x, y) [m] at `d_lp` [m]; return the result.
+        Return the lens planner's (heating distance, retreat distance) [m], or None.
 
-        `travel_d_lp`: the lens planner travels there at this d_lp (0: its own). `urgent`:
-        a retreat, accepted within ``retreat_accept_timeout`` or PaintFailed at once.
-        PaintFailed when the goal is refused or not accepted in time.
+        None until the lens planner said them (``focus/distances``); they follow its focal
+        calibration. The plan checks reach at both and times the moves with them.
+        """
+
+    @abc.abstractmethod
+    async def focus(self, target, at, travel_offset=0.0, urgent=False):
+        """
+        Focus the lens on world `target` (x, y) [m] `at` HEAT or RETREAT; return the result.
+
+        The lens planner resolves `at` to its own distance. `travel_offset`: it travels
+        there this far beyond the heating distance [m] (0: at its retreat distance).
+        `urgent`: a retreat, accepted within ``retreat_accept_timeout`` or PaintFailed at
+        once. PaintFailed when the goal is refused or not accepted in time.
         """
 
     @abc.abstractmethod

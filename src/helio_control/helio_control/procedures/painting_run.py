@@ -15,7 +15,8 @@ Per goal (paper Sec. IV-B and IV-C, Algorithm 1):
    (``missing``: no ``dots.yaml`` for this rig yet); then the plan (``helio_control.plan``):
    the picture (or the goal's points) to ordered world dots with per-dot N_p targets (for
    the width asked, with the calibration), checked against the rig's reach for the
-   estimated sun;
+   estimated sun at the lens planner's heating and retreat distances (``focus_distances``:
+   it owns them, issue 32; they follow its focal calibration);
 4. per dot, Algorithm 1 lines 6-14 (``helio_control.procedures.dot_procedure``); the sun estimate
    follows the sun by Eq 18 (``sun_estimator`` republishes it).
 
@@ -193,7 +194,17 @@ class PaintingRun:
             port.use_sun_estimate(sweep.estimate)
         self.dot.check()
 
-    def _refuse_what_the_sun_cannot_serve(self, goal):
+    async def _distances(self):
+        """Return the lens planner's (heating, retreat distance) [m], waiting for them."""
+        port = self.port
+        try:
+            await port.wait_until(lambda: port.focus_distances() is not None,
+                                  "the lens planner's distances (focus/distances)")
+        except TimeoutError as error:
+            raise PaintFailed(str(error)) from None
+        return port.focus_distances()
+
+    async def _refuse_what_the_sun_cannot_serve(self, goal):
         """Raise PaintFailed when the sun cannot serve `goal` now (see the module: the sky)."""
         port, settings = self.port, self.settings
         now = datetime.datetime.fromtimestamp(port.now(), UTC)
@@ -207,24 +218,25 @@ class PaintingRun:
                 options.offset_x, options.offset_y, options.canvas_size,
                 settings.sky_reach_spacing)
             direction, estimated = sun
+            heating, retreat = await self._distances()
             refusal = sky.reach_refusal(
-                port.rig, points, direction, settings.heating_distance,
-                settings.retreat_offset, settings.site, now,
+                port.rig, points, direction, heating, retreat - heating, settings.site, now,
                 settings.sky_min_sweep_elevation_deg,
                 ray_time=datetime.datetime.fromtimestamp(estimated, UTC)
                 if estimated > 0.0 else None)
         if refusal is not None:
             raise PaintFailed(f'refused: {refusal}')
 
-    def _make_plan(self, goal):
-        """Plan the goal's dots for the estimated sun (PaintFailed when it cannot)."""
+    def _make_plan(self, goal, distances):
+        """Plan the goal's dots for the sun and the lens planner's `distances` [m]."""
         port, settings = self.port, self.settings
         try:
             dot_size, note = dot_size_for_painting(settings.calibration_dir, settings.rig_file)
             if note:
                 port.get_logger().warning(note)
             options = options_for_dot_size(options_from_goal(goal), dot_size, goal.n_p_target > 0)
-            options.d_lp, options.retreat = settings.heating_distance, settings.retreat_offset
+            heating, retreat = distances
+            options.d_lp, options.retreat = heating, retreat - heating
             if (goal.cooling or settings.cooling) == 'window':
                 options.min_separation = settings.window_separation   # no hot neighbour next
                 options.cooling_wait = False                          # and no wait
@@ -266,10 +278,10 @@ class PaintingRun:
             port.get_logger().warning(note)
         return note
 
-    def _plan_or_resume(self, goal, resumed):
+    def _plan_or_resume(self, goal, resumed, distances):
         """Return (plan, the dots burnt before, the run resumed or '') of the goal."""
         if resumed is None:
-            return self._make_plan(goal), set(), ''
+            return self._make_plan(goal, distances), set(), ''
         run_dir, burnt = resumed
         try:
             with open(os.path.join(run_dir, 'plan.json')) as stream:
@@ -284,14 +296,14 @@ class PaintingRun:
         began = port.now()
         check_goal(goal)                                  # before anything moves
         key = goal_key(goal)
-        self._refuse_what_the_sun_cannot_serve(goal)      # no sweep for a sun too low
+        await self._refuse_what_the_sun_cannot_serve(goal)     # no sweep for a sun too low
         await self._prepare(feedback)
-        self._refuse_what_the_sun_cannot_serve(goal)      # nor a canvas out of its reach
+        await self._refuse_what_the_sun_cannot_serve(goal)     # nor a canvas out of its reach
         resumed = None if goal.fresh else unfinished_run(settings.runs_dir, key)
         self.dot_calibration_note = ''
         if resumed is None:                               # a new plan: sized as measured
             self.dot_calibration_note = await self._burn_test_row(goal, feedback)
-        plan, burnt, resumed_from = self._plan_or_resume(goal, resumed)
+        plan, burnt, resumed_from = self._plan_or_resume(goal, resumed, await self._distances())
         painted_from = port.now()                         # the dots' time, the estimate's
         run_dir = os.path.abspath(goal.run_dir) if goal.run_dir else os.path.join(
             settings.runs_dir, datetime.datetime.fromtimestamp(port.unix_now(), UTC).strftime(
