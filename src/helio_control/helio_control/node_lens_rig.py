@@ -209,8 +209,11 @@ class NodeLensRig(LensRigPort):
 
     def log(self, text, warning=False):
         """Log on the node's logger."""
-        logger = self.node.get_logger()
-        (logger.warning if warning else logger.info)(text)
+        # one call site per severity: rclpy's logger refuses a second severity from a line
+        if warning:
+            self.node.get_logger().warning(text)
+        else:
+            self.node.get_logger().info(text)
 
     async def in_background(self, function):
         """Compute function() on a thread (the node spins on)."""
