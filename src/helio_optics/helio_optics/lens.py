@@ -402,6 +402,22 @@ def _trace_block(lens, samples, block, s0, e1, e2, p_plane, n_plane):
     return (qx + k * s2x, qy + k * s2y, qz + k * s2z), (s2x, s2y, s2z), ok, hit, tir
 
 
+def _in_lens_frame(lens, samples, sun_direction, T_frame_lens, plane_point, plane_normal):
+    """
+    Return (R, origin, s0, n_plane, p_plane): the lens pose and the inputs in the lens frame.
+
+    The samples must have been cut for `lens` (ValueError otherwise); s0 is made unit.
+    """
+    if samples.lens != lens:
+        raise ValueError('the samples were made for another lens; build them for this one')
+    T = np.eye(4) if T_frame_lens is None else np.asarray(T_frame_lens, dtype=float)
+    R, origin = T[:3, :3], T[:3, 3]
+    s0 = unit(R.T @ np.asarray(sun_direction, dtype=float).reshape(3))
+    n_plane = R.T @ unit(np.asarray(plane_normal, dtype=float).reshape(3))
+    p_plane = R.T @ (np.asarray(plane_point, dtype=float).reshape(3) - origin)
+    return R, origin, s0, n_plane, p_plane
+
+
 def trace(lens, samples, sun_direction, T_frame_lens=None, plane_point=(0.0, 0.0, 0.0),
           plane_normal=(0.0, 0.0, 1.0), irradiance=900.0):
     """
@@ -411,13 +427,8 @@ def trace(lens, samples, sun_direction, T_frame_lens=None, plane_point=(0.0, 0.0
     ``frame`` (default identity: everything in the lens frame). ``irradiance``: direct
     normal irradiance q_s [W/m^2]. If the sun is behind the lens no ray hits (power 0).
     """
-    if samples.lens != lens:
-        raise ValueError('the samples were made for another lens; build them for this one')
-    T = np.eye(4) if T_frame_lens is None else np.asarray(T_frame_lens, dtype=float)
-    R, origin = T[:3, :3], T[:3, 3]
-    s0 = unit(R.T @ np.asarray(sun_direction, dtype=float).reshape(3))
-    n_plane = R.T @ unit(np.asarray(plane_normal, dtype=float).reshape(3))
-    p_plane = R.T @ (np.asarray(plane_point, dtype=float).reshape(3) - origin)
+    R, origin, s0, n_plane, p_plane = _in_lens_frame(lens, samples, sun_direction,
+                                                     T_frame_lens, plane_point, plane_normal)
     count = len(samples)
     cos_beta = -s0[2]
     if cos_beta <= 0.0:  # the sun shines on the lens from below: nothing is focused
@@ -501,15 +512,10 @@ def trace_bands(lens, samples, refractive_indices, sun_direction, T_frame_lens=N
     ``points`` and ``directions`` (B, N, 3), ``power`` and ``hit`` (B, N), ``tir_count``
     (B,); ``incident_power`` is one band's (the same for all).
     """
-    if samples.lens != lens:
-        raise ValueError('the samples were made for another lens; build them for this one')
+    R, origin, s0, n_plane, p_plane = _in_lens_frame(lens, samples, sun_direction,
+                                                     T_frame_lens, plane_point, plane_normal)
     indices = np.asarray(refractive_indices, dtype=float).reshape(-1)
     bands = indices.size
-    T = np.eye(4) if T_frame_lens is None else np.asarray(T_frame_lens, dtype=float)
-    R, origin = T[:3, :3], T[:3, 3]
-    s0 = unit(R.T @ np.asarray(sun_direction, dtype=float).reshape(3))
-    n_plane = R.T @ unit(np.asarray(plane_normal, dtype=float).reshape(3))
-    p_plane = R.T @ (np.asarray(plane_point, dtype=float).reshape(3) - origin)
     count = len(samples)
     cos_beta = -s0[2]
     if cos_beta <= 0.0:  # the sun shines on the lens from below: nothing is focused
