@@ -39,6 +39,11 @@ class DotRowSettings:
     start: tuple = (0.06, 0.14)               # the first dot, world x, y [m]
     pitch: float = 0.005                      # along +x [m]
 
+    def row(self):
+        """Return the row's RowGoals (``calibration_row``)."""
+        return calibration_row(tuple(self.n_p_targets), self.per_target, tuple(self.start),
+                               self.pitch)
+
 
 def row_conflict(row, canvas, points, clearance):
     """
@@ -66,31 +71,25 @@ def row_conflict(row, canvas, points, clearance):
     return ''
 
 
-async def burn_test_row(dot, feedback, settings, row_settings, say):
+async def burn_test_row(dot, feedback, settings, row, say):
     """
-    Burn, measure and fit the test row; save dots.yaml; return (calibration or None, note).
+    Burn, measure and fit the test `row` (RowGoals); save dots.yaml; return (fit, note).
 
     `dot` is the painting's DotProcedure (its checks, retreats and camera look), `say(text)`
-    logs a line. The note says what was done or why there is no calibration.
+    logs a line. The fit is None, and the note says why, when there is no calibration.
     """
-    row = calibration_row(tuple(row_settings.n_p_targets), row_settings.per_target,
-                          tuple(row_settings.start), row_settings.pitch)
-    samples, lines = [], []
-    index = 0
-    for goal in row:
-        for point in goal.points:
-            dot.check()
-            feedback.phase = 'calibrating_dots'
-            record = await dot.paint(feedback, index, np.array(point, dtype=float),
-                                     goal.n_p_target, 'paper', False, False,
-                                     guessed_diameter(goal.n_p_target), ())
-            index += 1
-            measured = float(record.get('measured_diameter', 0.0))
-            lines.append(f"test dot {index} (N_p {goal.n_p_target}): {record['outcome']}, "
-                         f"{measured * 1e3:.2f} mm in {record['dwell']:.1f} s")
-            say(lines[-1])
-            if record['outcome'] == 'burnt' and measured > 0.0:
-                samples.append(DotSample(goal.n_p_target, measured, float(record['dwell'])))
+    samples = []
+    tests = [(goal.n_p_target, point) for goal in row for point in goal.points]
+    for index, (n_p, point) in enumerate(tests):
+        dot.check()
+        feedback.phase = 'calibrating_dots'
+        record = await dot.paint(feedback, index, np.array(point, dtype=float), n_p, 'paper',
+                                 False, False, guessed_diameter(n_p), ())
+        measured = float(record.get('measured_diameter', 0.0))
+        say(f"test dot {index + 1} (N_p {n_p}): {record['outcome']}, {measured * 1e3:.2f} mm "
+            f"in {record['dwell']:.1f} s")
+        if record['outcome'] == 'burnt' and measured > 0.0:
+            samples.append(DotSample(n_p, measured, float(record['dwell'])))
     try:
         calibration = fit_dot_size(samples)
     except DotCalibrationError as error:

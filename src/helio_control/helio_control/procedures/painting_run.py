@@ -49,7 +49,7 @@ import traceback
 
 from helio_control import sky
 from helio_control.dot_check import expected_dot
-from helio_control.dot_size_calibration import calibration_row, dot_size_for_painting
+from helio_control.dot_size_calibration import dot_size_for_painting
 from helio_control.dot_size_calibration import options_for_dot_size
 from helio_control.picture_input import picture_from_image_msg, PictureError
 from helio_control.plan import options_from_goal, Plan, plan_dots, plan_picture
@@ -259,8 +259,7 @@ class PaintingRun:
             return ''
         options = options_from_goal(goal)
         row_settings = settings.dot_row or dot_size_run.DotRowSettings()
-        row = calibration_row(tuple(row_settings.n_p_targets), row_settings.per_target,
-                              tuple(row_settings.start), row_settings.pitch)
+        row = row_settings.row()
         conflict = dot_size_run.row_conflict(
             row, None if goal.points else dot_size_run.canvas_of(options),
             [[p.x, p.y] for p in goal.points],
@@ -273,7 +272,7 @@ class PaintingRun:
                                f'{settings.calibrate_dots}' + (f'; {refused}' if refused
                                                                else '') + ')')
         calibration, note = await dot_size_run.burn_test_row(
-            self.dot, feedback, settings, row_settings, port.get_logger().info)
+            self.dot, feedback, settings, row, port.get_logger().info)
         if calibration is None:
             port.get_logger().warning(note)
         return note
