@@ -25,6 +25,12 @@ RGB camera seeing no spot for ``cloud_dark_time`` (when the caller says whether 
 one). The cycle then answers CLOUD: retreat, wait for the sun, and heat the same dot again
 from the start with its full target (``restart``): a dot heated through a cloud is reheated,
 not counted.
+
+Beyond the paper (issue 29), for dots wider than N_p can ask for: the thermal image's hot
+area stops growing long before the char does (the simulated world's N_p levels off near 45
+after 90 s while the char still spreads), so a wide dot is heated to N_p* and then *held*
+there: ``hold`` seconds counted only between readings at or above N_p* (a cloud or a
+frozen camera does not count as holding), at most ``max_heating + hold`` in all.
 """
 
 from dataclasses import dataclass
@@ -62,6 +68,7 @@ class CycleSettings:
     cloud_n_p_drop: int = 3       # N_p this far under its peak while heating: sun lost [-]
     cloud_t_drop: float = 5.0     # T_max this far under its peak (below the cap): sun lost [K]
     cloud_dark_time: float = 1.0  # no spot in the RGB camera this long: sun lost [s]
+    hold: float = 0.0             # after N_p* is reached, heat on this long at N_p >= N_p* [s]
 
     def __post_init__(self):
         """Reject settings that cannot end a dot."""
@@ -74,6 +81,8 @@ class CycleSettings:
                                            and self.cloud_dark_time > 0.0):
             raise ValueError('cloud_n_p_drop must be >= 1, cloud_t_drop and cloud_dark_time '
                              '> 0')
+        if not (math.isfinite(self.hold) and self.hold >= 0.0):
+            raise ValueError(f'hold must be a finite time >= 0 s, got {self.hold}')
 
 
 class DotCycle:
@@ -81,10 +90,10 @@ class DotCycle:
     Algorithm 1 for one dot; see the module docstring.
 
     After ``start_heating(t)`` every ``update(t, n_p)`` returns HEAT until N_p reaches the
-    target (then RETREAT once), or until ``max_heating`` has passed (RETREAT with
-    ``outcome`` 'max_heating'). After the retreat it returns WAIT while N_p > 0 and NEXT once
-    N_p is 0 (or at once without ``wait_for_zero``, or after ``max_cooling`` with
-    ``cooling_timed_out`` set). The durations of both phases are kept for the cycle model.
+    target and has been held there for ``hold`` (then RETREAT once), or until
+    ``max_heating`` (plus ``hold``) has passed (RETREAT with ``outcome`` 'max_heating').
+    After the retreat it returns WAIT while N_p > 0 and NEXT once N_p is 0 (or at once
+    without ``wait_for_zero``, or after ``max_cooling`` with ``cooling_timed_out`` set). The durations of both phases are kept for the cycle model.
     """
 
     def __init__(self, settings=None):
@@ -101,6 +110,9 @@ class DotCycle:
         self.dark_since = math.nan
         self.clouds = 0               # heatings of this dot broken off by a loss of sun
         self.cloud_reason = ''
+        self.reached = math.nan       # when N_p first reached the target [s]
+        self.held = 0.0               # time held at N_p >= target since [s]
+        self._at_target_since = math.nan   # the last reading's time when it was at target
 
     @property
     def heating_time(self):
@@ -147,10 +159,16 @@ class DotCycle:
             if t_max is not None:
                 self.peak_t_max = max(self.peak_t_max, float(t_max))
             if n_p >= settings.n_p_target:
-                return self._retreat(now, 'charred')
-            if now - self.heating_started > settings.max_heating:
-                return self._retreat(now, 'max_heating')
-            return Decision.HEAT
+                if math.isnan(self.reached):
+                    self.reached = float(now)
+                elif not math.isnan(self._at_target_since):
+                    self.held += float(now) - self._at_target_since
+                self._at_target_since = float(now)
+                if self.held >= settings.hold:
+                    return self._retreat(now, 'charred')
+            else:
+                self._at_target_since = math.nan
+            return self._heat_or_give_up(now)
         if not settings.wait_for_zero or n_p <= 0:
             return self._finish(now)
         if now - self.retreated > settings.max_cooling:
@@ -167,7 +185,12 @@ class DotCycle:
         """
         if self.phase is not Phase.HEATING:
             raise RuntimeError(f'update_unread in phase {self.phase.value}')
-        if now - self.heating_started > self.settings.max_heating:
+        self._at_target_since = math.nan      # no reading: the hold does not go on blind
+        return self._heat_or_give_up(now)
+
+    def _heat_or_give_up(self, now):
+        settings = self.settings
+        if now - self.heating_started > settings.max_heating + settings.hold:
             return self._retreat(now, 'max_heating')
         return Decision.HEAT
 

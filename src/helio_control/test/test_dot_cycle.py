@@ -98,3 +98,32 @@ def test_misuse_and_bad_settings_are_refused():
         CycleSettings(n_p_target=0)
     with pytest.raises(ValueError, match='cloud_n_p_drop'):
         CycleSettings(cloud_n_p_drop=0)
+
+
+def test_a_held_dot_counts_only_the_time_at_its_target():
+    # readings every 0.5 s: the target is reached at 1.0 s, then the hold of 2 s counts the
+    # intervals between readings both at or above it; the dip at 2.5 s stops the count
+    cycle = DotCycle(CycleSettings(n_p_target=30, hold=2.0))
+    cycle.start_heating(0.0)
+    n_ps = [20, 30, 31, 31, 29, 31, 33, 34, 35, 35]     # 29: 2 under the peak, no cloud
+    decisions = [cycle.update(0.5 * (k + 1), n_p, CAP, CAP) for k, n_p in enumerate(n_ps)]
+    # held: 1.0-1.5, 1.5-2.0 (1.0 s); 2.5 below; 3.0-3.5, 3.5-4.0 (2.0 s) -> retreat at 4.0
+    assert decisions[:7] == [Decision.HEAT] * 7
+    assert decisions[7] is Decision.RETREAT and cycle.outcome == 'charred'
+    assert cycle.reached == pytest.approx(1.0) and cycle.held == pytest.approx(2.0)
+    assert cycle.heating_time == pytest.approx(4.0)
+
+
+def test_a_hold_does_not_go_on_through_frozen_frames_and_extends_the_time_limit():
+    cycle = DotCycle(CycleSettings(n_p_target=10, max_heating=1.0, hold=3.0))
+    cycle.start_heating(0.0)
+    assert cycle.update(0.5, 10, CAP, CAP) is Decision.HEAT
+    assert cycle.update_unread(1.5) is Decision.HEAT          # a frozen frame: not held
+    assert cycle.update(2.0, 11, CAP, CAP) is Decision.HEAT
+    assert cycle.held == 0.0                                   # 0.5-2.0 had no reading
+    assert cycle.update(3.5, 12, CAP, CAP) is Decision.HEAT   # held 1.5 s
+    # max_heating 1 s + hold 3 s: given up after 4 s although the hold is not complete
+    assert cycle.update(4.1, 12, CAP, CAP) is Decision.RETREAT
+    assert cycle.outcome == 'max_heating' and cycle.held == pytest.approx(2.1)
+    with pytest.raises(ValueError, match='hold'):
+        CycleSettings(hold=-1.0)
