@@ -168,7 +168,8 @@ def painting_graph(tmp_path):
                  'painter': {'calibration_dir': str(tmp_path / 'calibration'),
                              # the sized-dots test's row: one dot per target
                              'dot_calibration.n_p_targets': list(SIZED_TARGETS),
-                             'dot_calibration.per_target': 1}}
+                             'dot_calibration.per_target': 1,
+                             'dot_calibration.holds': [0.0]}}
     # the module's last test kills the servo driver
     with graph_of_processes(tmp_path, NODES, overrides, may_die=('servo_driver',)) \
             as (group, graph):

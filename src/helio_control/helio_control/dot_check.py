@@ -31,12 +31,27 @@ def guessed_diameter(n_p, pitch=PAPER_PITCH):
     return float(pitch) * math.sqrt(max(float(n_p), 1.0) / PAPER_N_P)
 
 
+def dot_hold(plan, index):
+    """
+    Return how long [s] the plan's dot is held at its N_p target once reached (0: not).
+
+    The plan's ``hold_s`` (a dot-size calibration's, for dots wider than N_p can ask for)
+    holds the dots at the plan's full ``n_p_target``; lighter tones are not held.
+    """
+    parameters = plan.parameters
+    hold = float(parameters.get('hold_s') or 0.0)
+    if hold > 0.0 and int(plan.n_p_targets[index]) == int(parameters.get('n_p_target', -1)):
+        return hold
+    return 0.0
+
+
 def expected_dot(plan, index):
     """Return (expected diameter [m], neighbouring targets (K, 2) [m]) of the plan's dot."""
     parameters = plan.parameters
     n_p = max(float(plan.n_p_targets[index]), 1.0)
     if parameters.get('dot_size'):
-        expected = float(DotSizeCalibration.from_parameters(parameters['dot_size']).diameter(n_p))
+        expected = DotSizeCalibration.from_parameters(parameters['dot_size']).diameter_of(
+            n_p, dot_hold(plan, index))
     else:
         expected = guessed_diameter(n_p, float(parameters.get('dot_radius') or PAPER_PITCH))
     dots = np.asarray(plan.dots, dtype=float).reshape(-1, 2)

@@ -13,8 +13,16 @@ and the paper's Fig. 8d shows the charred area growing with it. The simulated wo
 its dots burnt to N_p 15, 20 and 30 are 1.40-1.43, 1.61-1.63 and 1.96-1.99 mm wide
 (``test/test_painter.py``), d^2 = 2.0, 2.6 and 3.9 mm^2: on one line within 1 %. The dwell
 is not linear in N_p (the world's test dots: 3, 9 and 55 s to N_p 15, 25 and 40: past 30 the
-hot spot grows slowly), so it is the mean dwell of each target, interpolated linearly between
-targets (and along the last segment beyond them).
+hot spot grows slowly), so it is the mean dwell of each target, its logarithm interpolated
+linearly between targets (and along the end segments beyond them).
+
+Wider than N_p can ask for: the thermal image's hot area levels off long before the char
+stops spreading (the world's N_p stops near 45, its char still grows: 2.0 mm at N_p 30
+after 18 s, 2.45 mm after 60 s more), so the row also burns dots at its largest N_p target
+*held* there for ``holds`` seconds (``dot_cycle``'s ``hold``). Their mean charred area at
+each hold, and the N_p law's area at the target for no hold, are interpolated linearly in
+the hold (and along the last segment beyond it), the dwells likewise: ``dot_for`` gives the
+N_p target, and for a dot wider than the largest target's, that target and a hold.
 
 A fit needs ``MIN_SAMPLES`` dots at ``MIN_TARGETS`` distinct N_p targets, and the mean
 diameter must grow with the N_p target: anything else is refused with the reason, never
@@ -40,11 +48,12 @@ class DotCalibrationError(ValueError):
 
 @dataclass(frozen=True)
 class DotSample:
-    """One test dot: its N_p target, the diameter the camera measured [m], its dwell [s]."""
+    """One test dot: N_p target, diameter the camera measured [m], dwell [s], hold [s]."""
 
     n_p_target: int
     diameter: float
     dwell: float
+    hold: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -61,6 +70,10 @@ class DotSizeCalibration:
     residual_max: float          # the largest [m]
     dwell_residual_rms: float    # of the dwells [s]
     samples: int
+    hold_n_p: int = 0            # the N_p target the held dots were burnt to (0: none)
+    hold_s: tuple = ()           # the holds measured, ascending [s]
+    hold_area: tuple = ()        # the mean charred area of each [m^2]
+    hold_dwell_s: tuple = ()     # the mean dwell of each (reaching the target + hold) [s]
 
     def diameter(self, n_p):
         """Return the burnt diameter [m] of N_p target `n_p` (array or scalar)."""
@@ -75,17 +88,65 @@ class DotSizeCalibration:
         return max(1, int(round(n_p)))
 
     def dwell(self, n_p):
-        """Return the heating time [s] to N_p target `n_p` (array or scalar), at least 0."""
+        """
+        Return the heating time [s] to N_p target `n_p` (array or scalar).
+
+        The logarithm of the dwell is interpolated linearly in N_p (and along the end
+        segments beyond the targets): the dwell grows about exponentially with N_p (the
+        world's 15.3 and 48.5 s at N_p 30 and 40; its dots burnt alone at N_p 33 took 19-21 s,
+        a linear interpolation says 25 s, this 21.6 s).
+        """
         n_p = np.asarray(n_p, dtype=float)
-        x, y = np.asarray(self.dwell_n_p, dtype=float), np.asarray(self.dwell_s, dtype=float)
+        x = np.asarray(self.dwell_n_p, dtype=float)
+        y = np.log(np.asarray(self.dwell_s, dtype=float))
         low = y[0] + (n_p - x[0]) * (y[1] - y[0]) / (x[1] - x[0])
         high = y[-1] + (n_p - x[-1]) * (y[-1] - y[-2]) / (x[-1] - x[-2])
         inside = np.interp(n_p, x, y)
-        return np.maximum(np.where(n_p < x[0], low, np.where(n_p > x[-1], high, inside)), 0.0)
+        return np.exp(np.where(n_p < x[0], low, np.where(n_p > x[-1], high, inside)))
+
+    def _hold_curve(self, values):
+        """Return the holds (0 first) and `values` at them, (None, None) without held dots."""
+        if not self.hold_s:
+            return None, None
+        return (np.array((0.0,) + tuple(self.hold_s)), np.asarray(values, dtype=float))
+
+    def _held_area(self, hold):
+        x, y = self._hold_curve((float(self.diameter(self.hold_n_p)) ** 2,) + self.hold_area)
+        return float(_along(hold, x, y))
+
+    def dot_for(self, diameter):
+        """
+        Return (N_p target, hold [s]) that burn a dot `diameter` [m] wide.
+
+        Within the N_p law's measured range or without held dots: ``n_p_target`` and no
+        hold; wider: the held dots' target and the hold interpolated in the charred area.
+        """
+        n_p = self.n_p_target(diameter)
+        if not self.hold_s or diameter <= float(self.diameter(self.n_p_max)):
+            return n_p, 0.0
+        area0 = float(self.diameter(self.hold_n_p)) ** 2
+        holds, areas = self._hold_curve((area0,) + self.hold_area)
+        return self.hold_n_p, max(0.0, float(_along(diameter * diameter, areas, holds)))
+
+    def diameter_of(self, n_p, hold=0.0):
+        """Return the burnt diameter [m] of N_p target `n_p` held `hold` [s] at it."""
+        if hold > 0.0 and self.hold_s:
+            return math.sqrt(max(self._held_area(hold), 0.0))
+        return float(self.diameter(n_p))
+
+    def heating_time(self, n_p, hold=0.0):
+        """Return the heating time [s] of N_p target `n_p` held `hold` [s] (at least 0)."""
+        if hold > 0.0 and self.hold_s:
+            holds, dwells = self._hold_curve((float(self.dwell(self.hold_n_p)),)
+                                             + self.hold_dwell_s)
+            return max(0.0, float(_along(hold, holds, dwells)))
+        return float(self.dwell(n_p))
 
     def within(self, diameter):
         """Return whether `diameter` [m] lies within the diameters the fit measured."""
         low, high = self.diameter([self.n_p_min, self.n_p_max])
+        if self.hold_s:
+            high = max(high, math.sqrt(max(self.hold_area[-1], 0.0)))
         return bool(low <= diameter <= high)
 
     def to_parameters(self):
@@ -97,18 +158,28 @@ class DotSizeCalibration:
     @classmethod
     def from_parameters(cls, values):
         """Build from ``to_parameters`` values; ValueError naming a missing or bad one."""
+        optional = ('hold_n_p', 'hold_s', 'hold_area', 'hold_dwell_s')   # since held dots
         try:
-            fields = {name: values[name] for name in cls.__dataclass_fields__}
-            fields['dwell_n_p'] = tuple(float(v) for v in fields['dwell_n_p'])
-            fields['dwell_s'] = tuple(float(v) for v in fields['dwell_s'])
+            fields = {name: values[name] for name in cls.__dataclass_fields__
+                      if name not in optional or name in values}
+            for name in ('dwell_n_p', 'dwell_s', 'hold_s', 'hold_area', 'hold_dwell_s'):
+                if name in fields:
+                    fields[name] = tuple(float(v) for v in fields[name])
             calibration = cls(**fields)
         except (KeyError, TypeError) as error:
             raise ValueError(f'not a dot-size calibration: {error!r}') from None
+        holds = calibration.hold_s
+        if len(calibration.hold_area) != len(holds) or \
+                len(calibration.hold_dwell_s) != len(holds) or \
+                (holds and (calibration.hold_n_p < 1 or min(holds) <= 0.0)):
+            raise ValueError('hold_s, hold_area and hold_dwell_s must hold one value per hold '
+                             '(each > 0 s) and hold_n_p must be >= 1')
         if not calibration.area_per_n_p > 0.0:
             raise ValueError(f'area_per_n_p must be > 0, got {calibration.area_per_n_p}')
         if len(calibration.dwell_n_p) < 2 or len(calibration.dwell_n_p) != len(
-                calibration.dwell_s):
-            raise ValueError('dwell_n_p and dwell_s must hold two or more values each')
+                calibration.dwell_s) or not min(calibration.dwell_s) > 0.0:
+            raise ValueError('dwell_n_p and dwell_s must hold two or more values each, the '
+                             'dwells > 0 s')
         return calibration
 
     def summary(self):
@@ -121,7 +192,22 @@ class DotSizeCalibration:
                 f'{self.residual_max * 1e3:.3f} mm',
                 'dwell: ' + ', '.join(f'{s:.1f} s at N_p {n:g}' for n, s in
                                       zip(self.dwell_n_p, self.dwell_s))
-                + f' (RMS {self.dwell_residual_rms:.2f} s about the means)']
+                + f' (RMS {self.dwell_residual_rms:.2f} s about the means)'] + (
+                    [f'held at N_p {self.hold_n_p}: ' + ', '.join(
+                        f'{math.sqrt(max(a, 0.0)) * 1e3:.2f} mm after {h:g} s ({d:.1f} s in '
+                        'all)' for h, a, d in zip(self.hold_s, self.hold_area,
+                                                  self.hold_dwell_s))]
+                    if self.hold_s else [])
+
+
+def _along(x, xs, ys):
+    """Interpolate ys(xs) at x linearly; beyond either end along the end segment."""
+    xs, ys = np.asarray(xs, dtype=float), np.asarray(ys, dtype=float)
+    if x < xs[0]:
+        return ys[0] + (x - xs[0]) * (ys[1] - ys[0]) / (xs[1] - xs[0])
+    if x > xs[-1]:
+        return ys[-1] + (x - xs[-1]) * (ys[-1] - ys[-2]) / (xs[-1] - xs[-2])
+    return float(np.interp(x, xs, ys))
 
 
 def fit_dot_size(samples):
@@ -134,6 +220,8 @@ def fit_dot_size(samples):
     """
     usable = [s for s in samples if s.diameter > 0.0 and s.dwell > 0.0
               and math.isfinite(s.diameter) and math.isfinite(s.dwell)]
+    held = [s for s in usable if s.hold > 0.0]
+    usable = [s for s in usable if not s.hold > 0.0]
     targets = sorted({int(s.n_p_target) for s in usable})
     if len(usable) < MIN_SAMPLES or len(targets) < MIN_TARGETS:
         raise DotCalibrationError(
@@ -164,6 +252,7 @@ def fit_dot_size(samples):
     fitted = np.sqrt(np.maximum(a + b * n_p, 0.0))
     residual = diameter - fitted
     mean_dwell = np.interp(n_p, targets, dwells)
+    holds = _fit_holds(held, targets[-1], float(a + b * targets[-1]), dwells[-1])
     return DotSizeCalibration(
         area_intercept=float(a), area_per_n_p=float(b),
         dwell_n_p=tuple(float(t) for t in targets), dwell_s=tuple(dwells),
@@ -171,7 +260,40 @@ def fit_dot_size(samples):
         residual_rms=float(np.sqrt(np.mean(residual ** 2))),
         residual_max=float(np.max(np.abs(residual))),
         dwell_residual_rms=float(np.sqrt(np.mean((dwell - mean_dwell) ** 2))),
-        samples=len(usable))
+        samples=len(usable) + len(held), **holds)
+
+
+def _fit_holds(held, n_p_max, area_at_max, dwell_at_max):
+    """
+    Return the hold fields of a calibration from the held DotSamples (empty: none).
+
+    Held dots must have been burnt to the largest N_p target, and their mean area and dwell
+    must grow with the hold from the N_p law's area and dwell at that target (no hold).
+    """
+    if not held:
+        return {}
+    others = sorted({int(s.n_p_target) for s in held} - {int(n_p_max)})
+    if others:
+        raise DotCalibrationError(f'held test dots must be burnt to the largest N_p target '
+                                  f'{n_p_max}, not {others}')
+    hold = np.array([s.hold for s in held])
+    values = sorted(set(hold.tolist()))
+    area = [float(np.mean([s.diameter ** 2 for s in held if s.hold == h])) for h in values]
+    dwell = [float(np.mean([s.dwell for s in held if s.hold == h])) for h in values]
+    for (low, small), (high, large) in zip(zip([0.0] + values, [area_at_max] + area),
+                                           zip(values, area)):
+        if not large > small:
+            raise DotCalibrationError(
+                f'the held dots do not grow with the hold: {math.sqrt(max(small, 0.0)) * 1e3:.2f}'
+                f' mm after {low:g} s, {math.sqrt(large) * 1e3:.2f} mm after {high:g} s at '
+                f'N_p {n_p_max}')
+    for (low, short), (high, long) in zip(zip([0.0] + values, [dwell_at_max] + dwell),
+                                          zip(values, dwell)):
+        if long < short:
+            raise DotCalibrationError(f'a longer hold took less time: {short:.1f} s with '
+                                      f'{low:g} s held, {long:.1f} s with {high:g} s')
+    return {'hold_n_p': int(n_p_max), 'hold_s': tuple(values), 'hold_area': tuple(area),
+            'hold_dwell_s': tuple(dwell)}
 
 
 def samples_from_journal(journal):
@@ -181,7 +303,8 @@ def samples_from_journal(journal):
     A sample per dot burnt that the camera measured (``measured_diameter`` > 0), whatever its
     verdict: a test dot is judged against a guess of its size, its diameter is what counts.
     """
-    return [DotSample(int(dot.n_p_target), float(dot.measured_diameter), float(dot.dwell))
+    return [DotSample(int(dot.n_p_target), float(dot.measured_diameter), float(dot.dwell),
+                      float(dot.hold))
             for dot in journal.dots
             if dot.outcome == 'burnt' and dot.measured_diameter > 0.0]
 
@@ -224,8 +347,20 @@ def options_for_dot_size(options, calibration, n_p_given=False):
     from dataclasses import replace
     if calibration is None or n_p_given:
         return replace(options)
-    n_p = calibration.n_p_target(float(options.dot_radius))
+    n_p, _ = calibration.dot_for(float(options.dot_radius))
     return replace(options, n_p_target=n_p, n_p_min=min(int(options.n_p_min), n_p))
+
+
+def hold_for_dot_size(options, calibration, n_p_given=False):
+    """
+    Return the hold [s] at the N_p target of ``options_for_dot_size`` (0: none).
+
+    A dot wider than the calibration's largest N_p target burns is held at that target
+    (``DotSizeCalibration.dot_for``); a goal that gave its N_p target is not held.
+    """
+    if calibration is None or n_p_given:
+        return 0.0
+    return calibration.dot_for(float(options.dot_radius))[1]
 
 
 def dot_size_for_painting(directory, rig_file):
@@ -259,8 +394,12 @@ def painting_note(directory, rig_file):
 # at y 0.04 the simulated world's N_p stops at 13 (measured with its true focus)
 ROW_START = (0.06, 0.14)
 ROW_PITCH = 0.005
-# up to 40: the world's N_p grows slowly past 40 (45 after 90 s, the painter's max_heating)
-N_P_TARGETS = (15, 22, 30, 40)
+# up to 30: the world's N_p grows slowly past it (40 after 55 s, 45 after 90 s, the painter's
+# max_heating), while its char goes on spreading: wider dots are held at 30 (HOLDS)
+N_P_TARGETS = (12, 18, 24, 30)
+# [s] at N_p 30 in the world: 2.0 mm after 18 s, 2.2 mm held 20 s more, 2.35 mm 45 s more;
+# 2.5 mm is reached about 70 s on (the law's last segment)
+HOLDS = (20.0, 45.0)
 
 
 @dataclass(frozen=True)
@@ -272,14 +411,17 @@ class RowGoal:
     offset_x: float          # the canvas that holds them (the painter refuses dots outside)
     offset_y: float
     canvas_size: float
+    hold: float = 0.0        # [s] held at the target once reached (dot_cycle)
 
 
-def calibration_row(n_p_targets=N_P_TARGETS, per_target=2, start=ROW_START, pitch=ROW_PITCH):
+def calibration_row(n_p_targets=N_P_TARGETS, per_target=2, start=ROW_START, pitch=ROW_PITCH,
+                    holds=()):
     """
-    Return the TestGoals of a row of test dots: `per_target` dots for each N_p target.
+    Return the RowGoals of a row of test dots: `per_target` dots for each N_p target.
 
     The row runs along +x from `start` (world x, y [m]) by `pitch` [m]; one goal per
-    target, as a PaintPattern goal holds one N_p target. Each goal's canvas is the square
+    target, as a PaintPattern goal holds one N_p target, then one per hold in `holds` [s]
+    (held at the largest target; holds <= 0 are left out). Each goal's canvas is the square
     just around its own dots (its side at least the row's pitch and at most 0.1 m).
     """
     if per_target < 1 or not n_p_targets:
@@ -287,14 +429,19 @@ def calibration_row(n_p_targets=N_P_TARGETS, per_target=2, start=ROW_START, pitc
     if len(set(n_p_targets)) < MIN_TARGETS or len(n_p_targets) * per_target < MIN_SAMPLES:
         raise ValueError(f'a fit needs {MIN_SAMPLES} dots at {MIN_TARGETS} N_p targets at '
                          f'least, not {per_target} at {sorted(set(n_p_targets))}')
+    for hold in holds:
+        if not math.isfinite(hold):
+            raise ValueError(f'a hold must be a finite time [s], got {hold}')
+    groups = [(int(n_p), 0.0) for n_p in n_p_targets] + \
+        [(int(max(n_p_targets)), float(hold)) for hold in sorted(set(holds)) if hold > 0.0]
     goals, k = [], 0
-    for n_p in n_p_targets:
-        if int(n_p) < 1:
+    for n_p, hold in groups:
+        if n_p < 1:
             raise ValueError(f'an N_p target must be >= 1, got {n_p}')
         points = tuple((start[0] + pitch * (k + i), start[1]) for i in range(per_target))
         k += per_target
         margin = 0.5 * pitch
         side = min(max(points[-1][0] - points[0][0] + 2.0 * margin, 2.0 * pitch), 0.1)
-        goals.append(RowGoal(int(n_p), points, points[0][0] - margin,
-                             start[1] - 0.5 * side, side))
+        goals.append(RowGoal(n_p, points, points[0][0] - margin, start[1] - 0.5 * side, side,
+                             hold))
     return goals

@@ -204,6 +204,11 @@ def declare_painter_parameters(node):
             "The test row's first dot, world x and y, on the panel's margin outside the "
             'canvases painted [m].')),
         pitch=declare(node, 'dot_calibration.pitch', defaults.pitch,
-                      'Spacing of the test dots along world +x [m].', 0.002, 0.05))
+                      'Spacing of the test dots along world +x [m].', 0.002, 0.05),
+        holds=tuple(declare(
+            node, 'dot_calibration.holds', [float(h) for h in defaults.holds],
+            'Holds of the test row: per_target dots for each, held this long at the largest '
+            'N_p target once reached, for dots wider than N_p can ask for (values <= 0: '
+            'none) [s].')))
     settings.runs_dir = os.path.abspath(os.path.expanduser(settings.runs_dir))
     return settings

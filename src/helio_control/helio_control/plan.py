@@ -259,7 +259,7 @@ def default_rig():
 
 
 def plan_picture(picture, options=None, rig=None, sun_ray_robot=None, cycle=None,
-                 dot_size=None):
+                 dot_size=None, hold=0.0):
     """
     Plan the painting of a picture (paper Sec. IV-C, Eq 17; Fig. 9); return a Plan.
 
@@ -267,8 +267,8 @@ def plan_picture(picture, options=None, rig=None, sun_ray_robot=None, cycle=None
     (robot-frame unit ray s0, pointing down) to the nominal sun of the options; `cycle`
     ((CycleModel, MotionLimits)) to config/cycle_model.yaml; `dot_size` (a
     ``dot_size_calibration.DotSizeCalibration``, or None) to the heating time of the cycle
-    model (see ``plan_dots``). Raises PictureError, PlanOptionsError or PlanError with a
-    message naming the problem.
+    model and `hold` [s] to the full-target dots' hold (see ``plan_dots``). Raises
+    PictureError, PlanOptionsError or PlanError with a message naming the problem.
     """
     options = (options or load_plan_options()).validate()
     source = load_picture(picture)
@@ -291,7 +291,7 @@ def plan_picture(picture, options=None, rig=None, sun_ray_robot=None, cycle=None
         n_p = np.rint(options.n_p_min + (options.n_p_target - options.n_p_min)
                       * darkness).astype(int)
     plan = plan_dots(grid.world(grid_uv), options, rig, sun_ray_robot, grid_uv=grid_uv,
-                     n_p_targets=n_p, cycle=cycle, dot_size=dot_size)
+                     n_p_targets=n_p, cycle=cycle, dot_size=dot_size, hold=hold)
     plan.mode = features.mode
     plan.warnings[:0] = list(source.warnings)
     plan.notes[:0] = list(features.notes)
@@ -316,7 +316,7 @@ def plan_quality(plan, features, options):
 
 
 def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
-              n_p_targets=None, cycle=None, dot_size=None):
+              n_p_targets=None, cycle=None, dot_size=None, hold=0.0):
     """
     Plan explicit world points (N x 2 [m]): canvas, spacing and reach checks, order, time.
 
@@ -325,9 +325,13 @@ def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
     `dot_size` (a ``DotSizeCalibration``; the N_p targets already its, see
     ``dot_size_calibration.options_for_dot_size``) the time estimate heats each dot for the
     calibration's measured dwell, and the plan's ``parameters['dot_size']`` keeps the law
-    (the camera then expects each dot at the law's diameter, ``dot_check``).
+    (the camera then expects each dot at the law's diameter, ``dot_check``). `hold` [s]:
+    the dots at the full N_p target are held there that long (``dot_check.dot_hold``, a
+    dot wider than N_p can ask for: ``DotSizeCalibration.dot_for``).
     """
     options = (options or load_plan_options()).validate()
+    if not (math.isfinite(hold) and hold >= 0.0):
+        raise PlanError(f'a hold must be a finite time >= 0 s, got {hold}')
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     if not np.all(np.isfinite(points)):
         raise PlanError('dot coordinates must be finite')
@@ -339,6 +343,7 @@ def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
     parameters = asdict(options)
     if dot_size is not None:
         parameters['dot_size'] = dot_size.to_parameters()
+    parameters['hold_s'] = float(hold)
     if rig is None:
         rig, rig_file = default_rig()
         parameters['rig_file'] = rig_file or 'built-in defaults'
@@ -404,12 +409,21 @@ def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
     # the window rule goes on without the cooling wait (a hot neighbour still costs it above)
     estimate = estimate_time(model if options.cooling_wait else replace(model, cooling_s=0.0),
                              n_p[kept][order], approach, approach, travel,
-                             None if dot_size is None else dot_size.dwell)
+                             None if dot_size is None else _heating_time(dot_size, options,
+                                                                         hold))
     return Plan(dots=points[kept][order], n_p_targets=n_p[kept][order],
                 grid_uv=grid_uv[kept][order], rejected=rejected,
                 travel_m=metric.path_length(order), travel_s=float(np.sum(travel)),
                 time_estimate=estimate, mode='points', ordering=options.ordering,
                 parameters=parameters)
+
+
+def _heating_time(dot_size, options, hold):
+    """Return N_p targets -> the calibration's heating times, the full target's held."""
+    def heating_time(n_p_targets):
+        return np.array([dot_size.heating_time(n_p, hold if n_p == options.n_p_target else 0.0)
+                         for n_p in np.atleast_1d(n_p_targets)])
+    return heating_time
 
 
 def _rejection(point, uv, reason):

@@ -1,8 +1,8 @@
 """
 The dot-size calibration (issue 29, item 3): fit, inverse, store, and the plan that uses it.
 
-Samples are drawn from a known law (d^2 = a + b N_p, dwell = c + e N_p) with noise; the fit
-must recover it, refuse what it cannot fit, and the plan must burn and time its dots by it.
+Samples are drawn from a known law (d^2 = a + b N_p, dwell = c exp(e N_p)) with noise; the
+fit must recover it, refuse what it cannot fit, and the plan must burn and time its dots by it.
 """
 
 from dataclasses import replace
@@ -22,8 +22,13 @@ import pytest
 # the simulated world's law, about (test/test_painter.py: N_p 15, 20, 30 -> 1.40, 1.61, 1.97 mm)
 AREA_INTERCEPT = 0.12e-6     # [m^2]
 AREA_PER_N_P = 0.1253e-6     # [m^2]
-DWELL_INTERCEPT = 10.6       # [s] (the cycle model's heating time; the world's is not linear,
-DWELL_PER_N_P = 0.176        # [s]  and a linear law interpolated is exact: a check)
+DWELL_AT_ZERO = 0.94         # [s] the world's about (3.0 s at N_p 15, 48.5 s at N_p 40),
+DWELL_RATE = 0.1113          # [1/pixel] an exponential law, log-interpolated exactly: a check
+
+
+def law_dwell(n_p):
+    """Return the known law's dwell [s] at N_p `n_p`."""
+    return DWELL_AT_ZERO * math.exp(DWELL_RATE * n_p)
 
 
 def law_samples(targets=(10, 15, 20, 30, 40, 50), per_target=2, noise=0.02, seed=4):
@@ -33,7 +38,7 @@ def law_samples(targets=(10, 15, 20, 30, 40, 50), per_target=2, noise=0.02, seed
     for n_p in targets:
         for _ in range(per_target):
             diameter = math.sqrt(AREA_INTERCEPT + AREA_PER_N_P * n_p)
-            dwell = DWELL_INTERCEPT + DWELL_PER_N_P * n_p
+            dwell = law_dwell(n_p)
             samples.append(DotSample(n_p, diameter * (1.0 + noise * rng.standard_normal()),
                                      dwell * (1.0 + noise * rng.standard_normal())))
     return samples
@@ -43,9 +48,9 @@ def test_the_fit_recovers_a_known_law_and_says_its_residual():
     exact = fit_dot_size(law_samples(noise=0.0))
     assert exact.area_intercept == pytest.approx(AREA_INTERCEPT, abs=1e-12)
     assert exact.area_per_n_p == pytest.approx(AREA_PER_N_P, rel=1e-9)
-    # the dwells of a linear law: interpolated and extrapolated along it exactly
+    # the dwells of an exponential law: interpolated and extrapolated along it exactly
     for n_p in (5, 10, 12.5, 31, 50, 70):
-        assert exact.dwell(n_p) == pytest.approx(DWELL_INTERCEPT + DWELL_PER_N_P * n_p)
+        assert exact.dwell(n_p) == pytest.approx(law_dwell(n_p))
     assert exact.residual_rms < 1e-12 and (exact.n_p_min, exact.n_p_max) == (10, 50)
     noisy = fit_dot_size(law_samples(noise=0.02))
     truth = np.sqrt(AREA_INTERCEPT + AREA_PER_N_P * np.arange(10, 51))
@@ -61,7 +66,7 @@ def test_the_inverse_gives_the_n_p_target_and_the_dwell_of_a_diameter():
         assert calibration.n_p_target(float(calibration.diameter(n_p))) == n_p
     # 2.0 mm: (4.0 - 0.12) / 0.1253 = 31.0 pixels, heated 10.6 + 0.176 x 31 s
     assert calibration.n_p_target(2.0e-3) == 31
-    assert calibration.dwell(31) == pytest.approx(DWELL_INTERCEPT + 31 * DWELL_PER_N_P)
+    assert calibration.dwell(31) == pytest.approx(law_dwell(31))
     assert calibration.n_p_target(0.1e-3) == 1          # smaller than any: the least
     assert calibration.within(2.0e-3) and not calibration.within(3.5e-3)
     with pytest.raises(ValueError):
@@ -149,3 +154,51 @@ def test_the_test_row_is_one_goal_per_target_each_dot_inside_its_own_canvas():
         assert np.all(outside_canvas(others, options))
     with pytest.raises(ValueError, match='3 dots at 2 N_p targets'):
         calibration_row((30,), per_target=5)
+
+
+def held_samples(holds=(20.0, 45.0), growth=0.02e-6, per_target=2):
+    """Return law samples to N_p 30 and dots held there: area + growth x hold [m^2 / s]."""
+    samples = law_samples(targets=(10, 20, 30), per_target=per_target, noise=0.0)
+    area30 = AREA_INTERCEPT + AREA_PER_N_P * 30
+    dwell30 = law_dwell(30)
+    for hold in holds:
+        samples += [DotSample(30, math.sqrt(area30 + growth * hold), dwell30 + hold, hold)
+                    ] * per_target
+    return samples
+
+
+def test_held_dots_extend_the_law_past_the_largest_n_p_target():
+    growth = 0.02e-6                                  # [m^2 / s] held at N_p 30
+    calibration = fit_dot_size(held_samples(growth=growth))
+    assert (calibration.hold_n_p, calibration.hold_s) == (30, (20.0, 45.0))
+    assert calibration.samples == 10
+    area30 = AREA_INTERCEPT + AREA_PER_N_P * 30
+    # a linear growth in the hold: interpolated and extrapolated along it exactly
+    for hold in (5.0, 20.0, 30.0, 70.0):
+        width = math.sqrt(area30 + growth * hold)
+        n_p, held = calibration.dot_for(width)
+        assert n_p == 30 and held == pytest.approx(hold)
+        assert calibration.diameter_of(30, hold) == pytest.approx(width)
+        assert calibration.heating_time(30, hold) == pytest.approx(law_dwell(30) + hold)
+    # within the N_p law's range nothing is held
+    assert calibration.dot_for(math.sqrt(AREA_INTERCEPT + AREA_PER_N_P * 20)) == (20, 0.0)
+    assert calibration.within(math.sqrt(area30 + growth * 45.0))
+    assert not calibration.within(math.sqrt(area30 + growth * 60.0))
+    assert any('held at N_p 30' in line for line in calibration.summary())
+    # a calibration without held dots (an older dots.yaml) reads back and holds nothing
+    old = {name: value for name, value in fit_dot_size(law_samples()).to_parameters().items()
+           if not name.startswith('hold')}
+    unheld = type(calibration).from_parameters(old)
+    assert unheld.hold_s == () and unheld.dot_for(0.003)[1] == 0.0
+    assert type(calibration).from_parameters(calibration.to_parameters()) == calibration
+
+
+def test_held_dots_that_do_not_grow_or_at_another_target_are_refused():
+    with pytest.raises(DotCalibrationError, match='do not grow with the hold'):
+        fit_dot_size(held_samples(growth=-0.001e-6))
+    stray = law_samples(targets=(10, 20, 30), noise=0.0) + [DotSample(20, 2e-3, 40.0, 10.0)]
+    with pytest.raises(DotCalibrationError, match='largest N_p target 30, not \\[20\\]'):
+        fit_dot_size(stray)
+    assert [(goal.n_p_target, goal.hold) for goal in calibration_row(
+        (10, 20, 30), 1, (0.06, 0.14), 0.005, holds=(0.0, 15.0))] == [
+            (10, 0.0), (20, 0.0), (30, 0.0), (30, 15.0)]

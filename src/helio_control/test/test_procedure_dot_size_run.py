@@ -18,7 +18,8 @@ from helio_msgs.action import PaintPattern
 from painter_rig_model import RigModel, run, settings
 import pytest
 
-ROW = DotRowSettings(n_p_targets=(10, 20, 30), per_target=1, start=(0.05, 0.10), pitch=0.008)
+ROW = DotRowSettings(n_p_targets=(10, 20, 30), per_target=1, start=(0.05, 0.10), pitch=0.008,
+                     holds=())
 DOTS = [(0.05, 0.07), (0.066, 0.07)]        # the goal's own dots, world [m]
 WIDTH = 1.2e-3                              # asked of them: within the row's N_p 10-30 [m]
 
@@ -36,9 +37,9 @@ def camera_of_the_model(monkeypatch):
                         lambda *args: RigModel.measure(MEASURER, *args))
 
 
-def model_of(tmp_path, rule):
+def model_of(tmp_path, rule, row=ROW):
     """Return a RigModel whose RGB camera measures the char, calibrate_dots `rule`."""
-    model = RigModel(settings(tmp_path, verify_dots=True, calibrate_dots=rule, dot_row=ROW))
+    model = RigModel(settings(tmp_path, verify_dots=True, calibrate_dots=rule, dot_row=row))
     model.camera = True
     MEASURER.wood, MEASURER.peak = model.wood, model.peak
     return model
@@ -82,6 +83,34 @@ def test_the_row_is_burnt_first_fitted_saved_and_used_by_the_plan(tmp_path):
         goal_of(DOTS, tmp_path / 'runs' / 'second')))
     assert ending == 'succeed' and 'test dots' not in result.message, result.message
     assert len(again.heatings) == len(DOTS)
+
+
+def test_dots_wider_than_n_p_can_ask_for_are_held_as_the_held_test_dots_were(tmp_path):
+    # the model's N_p levels off near 49 pixels (its rise settles at G = 300 K) while its
+    # char keeps growing with the rise; a dot held h seconds at N_p >= 30 (rise r30) peaks
+    # at G - (G - r30) exp(-h / tau): the char the hold law must predict
+    row = DotRowSettings(n_p_targets=(10, 20, 30), per_target=1, start=(0.05, 0.10),
+                         pitch=0.008, holds=(4.0, 12.0))
+    model = model_of(tmp_path, 'missing', row)
+    wood = model.wood
+    widest_unheld = wood.char_diameter(wood.rise_reaching(30))
+    width = widest_unheld + 0.6 * (wood.char_diameter(
+        wood.rise - (wood.rise - wood.rise_reaching(30)) * math.exp(-12.0 / wood.tau))
+        - widest_unheld)                              # between the two held test dots
+    goal = goal_of(DOTS, tmp_path / 'runs' / 'held')
+    goal.dot_radius = width
+    result, ending = run(PaintingRun(model, model.settings).execute(goal))
+    assert ending == 'succeed' and result.success, result.message
+    assert 'dot-size calibration from 5 test dots' in result.message
+    calibration = load_dot_calibration(model.settings.calibration_dir, '')
+    assert calibration.hold_s == (4.0, 12.0) and calibration.hold_n_p == 30
+    n_p, hold = calibration.dot_for(width)
+    assert n_p == 30 and 0.0 < hold < 12.0
+    for target in DOTS:                                # the char the model left, not the law
+        assert wood.char_diameter(model.peak[target]) == pytest.approx(width, rel=0.1)
+    # a held dot's dwell is the time to N_p 30 plus the hold, on the model's own clock
+    to_30 = -wood.tau * math.log(1.0 - wood.rise_reaching(30) / wood.rise)
+    assert calibration.heating_time(n_p, hold) == pytest.approx(to_30 + hold, abs=1.0)
 
 
 def test_no_row_on_a_dry_run_never_or_where_it_would_burn_into_the_goal(tmp_path):

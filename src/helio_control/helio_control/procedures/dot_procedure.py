@@ -108,7 +108,7 @@ class DotProcedure:
             raise PaintFailed('device fault: ' + '; '.join(faults))
 
     async def paint(self, feedback, index, target, n_p_target, cooling, dry_run,
-                    hot_next=False, expected=0.0, neighbours=()):
+                    hot_next=False, expected=0.0, neighbours=(), hold=0.0):
         """
         Burn one dot and verify it with the RGB camera; return its journal record's fields.
 
@@ -118,11 +118,12 @@ class DotProcedure:
         (nothing dark of at least ``verify_min_diameter_ratio`` of `expected` [m] at the
         target) is heated again, at most ``verify_reheats`` times, then counted as failed.
         The lens is retreated through all of it: a failed verification leaves it where the
-        heating left it, off the wood.
+        heating left it, off the wood. `hold` [s]: once N_p reaches the target the dot is
+        held there that long (``dot_cycle``: a dot wider than N_p can ask for).
         """
         port, settings = self.port, self.settings
         record = await self.heat(feedback, index, target, n_p_target, cooling, dry_run,
-                                 hot_next)
+                                 hot_next, hold)
         record.update(verdict='', verdict_reason='', measured_diameter=0.0, reheats=0)
         if dry_run or not settings.verify_dots or not record['dwell'] > 0.0:
             return record             # nothing heated: nothing to see
@@ -157,7 +158,7 @@ class DotProcedure:
             port.get_logger().warning(
                 f'dot {index}: the RGB camera sees no dot ({measure.reason}): heated again')
             again = await self.heat(feedback, index, target, n_p_target, cooling, dry_run,
-                                    hot_next)
+                                    hot_next, hold)
             record.update(reheats=record['reheats'] + 1, end=again['end'],
                           dwell=record['dwell'] + again['dwell'],
                           restarts=record['restarts'] + again['restarts'],
@@ -206,19 +207,20 @@ class DotProcedure:
             return None, f'the frame cannot be measured: {error}'
 
     async def heat(self, feedback, index, target, n_p_target, cooling, dry_run,
-                   hot_next=False):
+                   hot_next=False, hold=0.0):
         """
         Burn one dot (Algorithm 1 lines 6-14); return its journal record's fields.
 
         `hot_next`: with the window rule, the next dot lies in this one's hot region, so
         this dot retreats and waits for N_p = 0 in its window before the next begins.
+        `hold` [s]: heat on that long at N_p >= the target once reached.
         """
         port, settings = self.port, self.settings
         start = port.now()
         record = {'index': int(index), 'target': [float(target[0]), float(target[1])],
                   'n_p_target': n_p_target, 'start': start, 'end': start, 'dwell': 0.0,
                   'peak_n_p': 0, 't_max': -273.15, 'outcome': 'burnt', 'reason': '',
-                  'restarts': 0}
+                  'restarts': 0, 'hold': float(hold)}
         if dry_run:
             feedback.phase = 'moving'
             port.publish_feedback(feedback)
@@ -229,7 +231,8 @@ class DotProcedure:
         cycle = DotCycle(CycleSettings(n_p_target=n_p_target,
                                        max_heating=settings.max_heating,
                                        max_cooling=settings.max_cooling,
-                                       wait_for_zero=(cooling == 'paper' or hot_next)))
+                                       wait_for_zero=(cooling == 'paper' or hot_next),
+                                       hold=hold))
         window = cooling == 'window'
         port.set_window(target if window else None)
         travel = settings.window_travel_offset
@@ -276,9 +279,14 @@ class DotProcedure:
                 continue
             break
         record.update(dwell=float(cycle.heating_time), peak_n_p=int(cycle.peak_n_p))
-        if cycle.outcome != 'charred':
+        if cycle.outcome != 'charred' and cycle.peak_n_p >= n_p_target:
+            record.update(outcome='failed', reason=f'held {cycle.held:.1f} of {hold:g} s at '
+                          f'N_p >= {n_p_target} within {settings.max_heating + hold:g} s '
+                          '(max_heating + the hold)')
+        elif cycle.outcome != 'charred':
             record.update(outcome='failed', reason=f'N_p reached only {cycle.peak_n_p} of '
-                          f'{n_p_target} in {settings.max_heating:g} s (max_heating)')
+                          f'{n_p_target} in {settings.max_heating + hold:g} s (max_heating'
+                          + (' + the hold)' if hold else ')'))
         feedback.phase = 'cooling'
         port.publish_feedback(feedback)
         while decision is not Decision.NEXT:

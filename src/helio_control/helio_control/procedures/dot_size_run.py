@@ -24,7 +24,8 @@ import math
 from helio_control.calibration_store import rig_description
 from helio_control.dot_check import guessed_diameter
 from helio_control.dot_size_calibration import (calibration_row, DotCalibrationError, DotSample,
-                                                fit_dot_size, save_dot_calibration)
+                                                fit_dot_size, HOLDS, N_P_TARGETS,
+                                                save_dot_calibration)
 import numpy as np
 
 CALIBRATE_DOTS = ('missing', 'always', 'never')
@@ -34,15 +35,16 @@ CALIBRATE_DOTS = ('missing', 'always', 'never')
 class DotRowSettings:
     """Where and how the test row is burnt (the painter's ``dot_calibration.*``)."""
 
-    n_p_targets: tuple = (15, 22, 30, 40)     # [-] one goal's worth of dots per target
+    n_p_targets: tuple = N_P_TARGETS          # [-] one goal's worth of dots per target
     per_target: int = 2
     start: tuple = (0.06, 0.14)               # the first dot, world x, y [m]
     pitch: float = 0.005                      # along +x [m]
+    holds: tuple = HOLDS                      # [s] at the largest target (<= 0: none)
 
     def row(self):
         """Return the row's RowGoals (``calibration_row``)."""
         return calibration_row(tuple(self.n_p_targets), self.per_target, tuple(self.start),
-                               self.pitch)
+                               self.pitch, tuple(self.holds))
 
 
 def row_conflict(row, canvas, points, clearance):
@@ -79,17 +81,18 @@ async def burn_test_row(dot, feedback, settings, row, say):
     logs a line. The fit is None, and the note says why, when there is no calibration.
     """
     samples = []
-    tests = [(goal.n_p_target, point) for goal in row for point in goal.points]
-    for index, (n_p, point) in enumerate(tests):
+    tests = [(goal.n_p_target, goal.hold, point) for goal in row for point in goal.points]
+    for index, (n_p, hold, point) in enumerate(tests):
         dot.check()
         feedback.phase = 'calibrating_dots'
         record = await dot.paint(feedback, index, np.array(point, dtype=float), n_p, 'paper',
-                                 False, False, guessed_diameter(n_p), ())
+                                 False, False, guessed_diameter(n_p), (), hold=hold)
         measured = float(record.get('measured_diameter', 0.0))
-        say(f"test dot {index + 1} (N_p {n_p}): {record['outcome']}, {measured * 1e3:.2f} mm "
-            f"in {record['dwell']:.1f} s")
+        held = f', held {hold:g} s' if hold else ''
+        say(f"test dot {index + 1} (N_p {n_p}{held}): {record['outcome']}, "
+            f"{measured * 1e3:.2f} mm in {record['dwell']:.1f} s")
         if record['outcome'] == 'burnt' and measured > 0.0:
-            samples.append(DotSample(n_p, measured, float(record['dwell'])))
+            samples.append(DotSample(n_p, measured, float(record['dwell']), hold))
     try:
         calibration = fit_dot_size(samples)
     except DotCalibrationError as error:

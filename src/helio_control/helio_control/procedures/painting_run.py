@@ -48,9 +48,9 @@ import os
 import traceback
 
 from helio_control import sky
-from helio_control.dot_check import expected_dot
+from helio_control.dot_check import dot_hold, expected_dot
 from helio_control.dot_size_calibration import dot_size_for_painting
-from helio_control.dot_size_calibration import options_for_dot_size
+from helio_control.dot_size_calibration import hold_for_dot_size, options_for_dot_size
 from helio_control.picture_input import picture_from_image_msg, PictureError
 from helio_control.plan import options_from_goal, Plan, plan_dots, plan_picture
 from helio_control.plan import PlanError, PlanOptionsError
@@ -234,7 +234,9 @@ class PaintingRun:
             dot_size, note = dot_size_for_painting(settings.calibration_dir, settings.rig_file)
             if note:
                 port.get_logger().warning(note)
-            options = options_for_dot_size(options_from_goal(goal), dot_size, goal.n_p_target > 0)
+            n_p_given = goal.n_p_target > 0
+            options = options_for_dot_size(options_from_goal(goal), dot_size, n_p_given)
+            hold = hold_for_dot_size(options_from_goal(goal), dot_size, n_p_given)
             heating, retreat = distances
             options.d_lp, options.retreat = heating, retreat - heating
             if (goal.cooling or settings.cooling) == 'window':
@@ -243,10 +245,10 @@ class PaintingRun:
             sun = port.sun_ray()[0]
             if goal.points:
                 points = np.array([[p.x, p.y] for p in goal.points], dtype=float)
-                return plan_dots(points, options, port.rig, sun, dot_size=dot_size)
+                return plan_dots(points, options, port.rig, sun, dot_size=dot_size, hold=hold)
             picture = goal.image_path if goal.image_path else \
                 picture_from_image_msg(goal.image)
-            return plan_picture(picture, options, port.rig, sun, dot_size=dot_size)
+            return plan_picture(picture, options, port.rig, sun, dot_size=dot_size, hold=hold)
         except (PictureError, PlanError, PlanOptionsError, ValueError) as error:
             raise PaintFailed(f'cannot plan the painting: {error}') from None
 
@@ -336,7 +338,8 @@ class PaintingRun:
                 *(plan.dots[todo[position + 1]] - target))) < settings.window_separation
             expected, neighbours = expected_dot(plan, i)
             outcome = await dot.paint(feedback, i, target, int(plan.n_p_targets[i]), cooling,
-                                      goal.dry_run, hot_next, expected, neighbours)
+                                      goal.dry_run, hot_next, expected, neighbours,
+                                      hold=dot_hold(plan, i))
             cycles.append(outcome['end'] - outcome['start'])
             self._journal.dot(**outcome)
             if outcome['outcome'] == 'burnt':
