@@ -93,7 +93,8 @@ class DotCycle:
     target and has been held there for ``hold`` (then RETREAT once), or until
     ``max_heating`` (plus ``hold``) has passed (RETREAT with ``outcome`` 'max_heating').
     After the retreat it returns WAIT while N_p > 0 and NEXT once N_p is 0 (or at once
-    without ``wait_for_zero``, or after ``max_cooling`` with ``cooling_timed_out`` set). The durations of both phases are kept for the cycle model.
+    without ``wait_for_zero``, or after ``max_cooling`` with ``cooling_timed_out`` set).
+    The durations of both phases are kept for the cycle model.
     """
 
     def __init__(self, settings=None):
