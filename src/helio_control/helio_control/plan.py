@@ -409,8 +409,10 @@ def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
     # the window rule goes on without the cooling wait (a hot neighbour still costs it above)
     estimate = estimate_time(model if options.cooling_wait else replace(model, cooling_s=0.0),
                              n_p[kept][order], approach, approach, travel,
-                             None if dot_size is None else _heating_time(dot_size, options,
-                                                                         hold))
+                             None if dot_size is None else dot_size.dwell,
+                             previous_distances(points[kept][order]),
+                             _held_seconds(dot_size, n_p[kept][order], options.n_p_target,
+                                           hold))
     return Plan(dots=points[kept][order], n_p_targets=n_p[kept][order],
                 grid_uv=grid_uv[kept][order], rejected=rejected,
                 travel_m=metric.path_length(order), travel_s=float(np.sum(travel)),
@@ -418,12 +420,18 @@ def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
                 parameters=parameters)
 
 
-def _heating_time(dot_size, options, hold):
-    """Return N_p targets -> the calibration's heating times, the full target's held."""
-    def heating_time(n_p_targets):
-        return np.array([dot_size.heating_time(n_p, hold if n_p == options.n_p_target else 0.0)
-                         for n_p in np.atleast_1d(n_p_targets)])
-    return heating_time
+def previous_distances(dots):
+    """Return each dot's distance [m] to the dot before it in burn order (inf for the first)."""
+    dots = np.asarray(dots, dtype=float).reshape(-1, 2)
+    return np.concatenate([[np.inf], np.hypot(*np.diff(dots, axis=0).T)])
+
+
+def _held_seconds(dot_size, n_p_targets, full_target, hold):
+    """Return each dot's time held at its target (the calibration's, measured), or None."""
+    if dot_size is None or not hold > 0.0:
+        return None
+    held = dot_size.heating_time(full_target, hold) - float(dot_size.dwell(full_target))
+    return np.where(np.asarray(n_p_targets) == full_target, max(held, 0.0), 0.0)
 
 
 def _rejection(point, uv, reason):

@@ -30,8 +30,10 @@ pitches by default); a target with no charred dot inside it counts as missing. D
 coefficient of variation: standard deviation / mean of those diameters. The painter's own
 evidence, the RGB camera's verdict per dot (the journal's ``verdict``), is counted beside
 it (``dots_verified_by_camera``, ``camera_diameter_*``). Painting time: the result's
-duration (the graph's clock: simulated seconds in simulation); the plan's estimate is
-compared with it as (estimate - actual) / actual.
+duration (the graph's clock: simulated seconds in simulation) less the dot-size test row's
+(the journal's ``dot_calibration_s``, ``dot_calibration_time_s``: it is burnt before the plan
+is made, so the plan cannot estimate it); the plan's estimate is compared with it as
+(estimate - actual) / actual.
 
 Pure Python (numpy, OpenCV, matplotlib with the Agg backend, the bag reader): no rclpy
 graph is needed, the bag's messages are decoded with the installed message classes.
@@ -408,6 +410,9 @@ def make_report(run_dir, match_radius=None):
     result = journal.result
     actual = result.duration if result else (
         (dots[-1].end - journal.run.started) if dots and journal.run else None)
+    row_time = journal.run.dot_calibration_s if journal.run else 0.0
+    if actual is not None:
+        actual -= row_time            # the test row is burnt before the plan: not estimated
     estimate = float(plan.time_estimate.get('total_s')) if plan else None
     summary = {
         'run': os.path.basename(os.path.normpath(run_dir)),
@@ -428,6 +433,7 @@ def make_report(run_dir, match_radius=None):
         'diameter_cv': _finite_or_none(np.std(diameters) / np.mean(diameters))
         if len(diameters) > 1 else None,
         'painting_time_s': _finite_or_none(actual) if actual is not None else None,
+        'dot_calibration_time_s': _finite_or_none(row_time),
         'wall_time_s': _finite_or_none(result.wall_duration) if result else None,
         'plan_estimate_s': estimate,
         'estimate_error_ratio': _finite_or_none((estimate - actual) / actual)

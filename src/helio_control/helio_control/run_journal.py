@@ -4,8 +4,9 @@ The run journal: what a painting did, one JSON object per line, written as it ha
 ``runs/<UTC time>/journal.jsonl`` is written by the painter and read by the run report
 (``helio_control.report``). Lines, in order:
 
-1. ``{"kind": "run", "goal": {...}, "started": <sim s>, "wall_started": <unix s>}``: the
-   PaintPattern goal's fields (``goal_to_dict``) and when the run began;
+1. ``{"kind": "run", "goal": {...}, "started": <sim s>, "wall_started": <unix s>,
+   "dot_calibration_s": <s>}``: the PaintPattern goal's fields (``goal_to_dict``), when the
+   run began and how long of it the dot-size test row took (0 or absent: none);
 2. one ``{"kind": "dot", "index", "target": [x, y], "n_p_target", "start", "end", "dwell",
    "peak_n_p", "t_max", "outcome", "reason", "restarts"}`` per dot as it finishes (times in
    simulated or ROS seconds, ``dwell`` the heating time [s], ``t_max`` [degC], ``target``
@@ -65,6 +66,7 @@ class RunRecord:
     goal: dict
     started: float              # [s] on the graph's clock (simulated in the simulated world)
     wall_started: float         # [s] unix time
+    dot_calibration_s: float = 0.0   # [s] of it the dot-size test row took, before the plan
     kind: str = field(default='run', init=False)
 
     def validate(self):
@@ -73,6 +75,7 @@ class RunRecord:
             raise JournalError(f'run: goal must be an object, not {self.goal!r}')
         self.started = _number('run', 'started', self.started)
         self.wall_started = _number('run', 'wall_started', self.wall_started)
+        self.dot_calibration_s = _number('run', 'dot_calibration_s', self.dot_calibration_s)
         return self
 
 
@@ -213,10 +216,10 @@ class JournalWriter:
         self._stream.flush()
         return record
 
-    def run(self, goal, started, wall_started):
+    def run(self, goal, started, wall_started, dot_calibration_s=0.0):
         """Append the run line (`goal`: a message or a dict)."""
         goal = goal if isinstance(goal, dict) else goal_to_dict(goal)
-        return self.write(RunRecord(goal, started, wall_started))
+        return self.write(RunRecord(goal, started, wall_started, float(dot_calibration_s)))
 
     def dot(self, **values):
         """Append one dot line (the DotRecord fields)."""

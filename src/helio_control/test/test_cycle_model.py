@@ -28,7 +28,7 @@ def test_estimate_of_three_dots_by_hand():
 def test_config_file_matches_the_documented_defaults():
     model, limits = load_cycle_config(CONFIG)
     assert model == CycleModel()
-    assert model.heating_time(30) == pytest.approx(15.88)
+    assert model.heating_time(30) == pytest.approx(16.28)     # a dot burnt alone
     assert np.degrees(limits.arm_velocity) == pytest.approx([100.0] * 3)
     assert np.degrees(limits.wrist_acceleration) == pytest.approx(450.0)
 
@@ -63,3 +63,16 @@ def test_bad_parameters_are_named():
         CycleModel.from_parameters({'warmup_s': 1.0})
     with pytest.raises(ValueError, match='no records'):
         fit_cycle_model([])
+
+
+def test_the_heat_a_dot_leaves_shortens_the_next_ones_heating_by_its_distance():
+    model = CycleModel(preheat_share=0.4, preheat_reach=0.004)
+    # 1 - 0.4 exp(-(r / 4 mm)^2): at 0, 4 mm, 8 mm; none before (inf, NaN): a dot alone
+    assert model.preheat_factor([0.0, 0.004, 0.008, np.inf, np.nan]) == pytest.approx(
+        [0.6, 1.0 - 0.4 / np.e, 1.0 - 0.4 * np.exp(-4.0), 1.0, 1.0])
+    assert CycleModel(preheat_reach=0.0).preheat_factor(0.001) == pytest.approx(1.0)
+    alone = estimate_time(model, [30, 30], [0.5, 0.5], [0.5, 0.5], [1.0])
+    after = estimate_time(model, [30, 30], [0.5, 0.5], [0.5, 0.5], [1.0],
+                          previous_distance=[np.inf, 0.004])
+    assert alone['heating_s'] - after['heating_s'] == pytest.approx(
+        0.4 / np.e * float(model.heating_time(30)))

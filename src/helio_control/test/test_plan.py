@@ -111,9 +111,15 @@ def test_the_window_rules_plan_keeps_hot_neighbours_apart_and_waits_no_cooling()
     steps = np.diff(window.dots, axis=0)
     assert np.hypot(steps[:, 0], steps[:, 1]).min() >= 0.0075
     model, _ = load_cycle_config()
-    saved = paper.time_estimate['total_s'] - window.time_estimate['total_s']
+    saved = (paper.time_estimate['total_s'] - paper.time_estimate['heating_s']) - (
+        window.time_estimate['total_s'] - window.time_estimate['heating_s'])
     # per dot the paper's rule waits max(cooling, retreat move) and the window rule only the
     # retreat move; the window's longer tour costs a little of it back
     assert 0.5 * model.cooling_s * len(paper) < saved < model.cooling_s * len(paper)
+    # and its dots, 7.5 mm or more from the dot before, heat the wood the next one needs
+    # no more: each heats about as long as a dot alone (the paper's, 3 mm apart, less)
+    alone = float(model.heating_time(30))
+    assert window.time_estimate['heating_s'] > 0.97 * alone * len(window)
+    assert paper.time_estimate['heating_s'] < 0.85 * alone * len(paper)
     with pytest.raises(PlanOptionsError, match='cooling_wait'):
         PlanOptions(cooling_wait='no').validate()

@@ -39,7 +39,7 @@ def test_touching_dots_are_counted_and_sized_per_target(tmp_path):
             world.panel.char[np.hypot(grid_x - target[0], grid_y - target[1]) <= DRAWN / 2] = 1
     world.write_outputs(str(tmp_path))
     with JournalWriter(str(tmp_path / 'journal.jsonl')) as journal:
-        journal.run({'points': targets.tolist()}, 0.0, 0.0)
+        journal.run({'points': targets.tolist()}, 0.0, 0.0, dot_calibration_s=3.0)
         for index, target in enumerate(plan.dots.tolist()):
             journal.dot(index=index, target=target, n_p_target=30, start=index,
                         end=index + 1.0, dwell=0.5, peak_n_p=30, t_max=180.9,
@@ -60,3 +60,8 @@ def test_touching_dots_are_counted_and_sized_per_target(tmp_path):
     assert summary['dots_verified_by_camera'] == 7 and summary['dots_camera_not_charred'] == 1
     assert summary['camera_diameter_mean_m'] == pytest.approx(1.8e-3)
     assert summary['dots_not_verified'] == 0
+    # the goal took 8 s, 3 s of which the dot-size test row before the plan: the painting
+    # the plan estimated took 5 s
+    assert summary['dot_calibration_time_s'] == 3.0 and summary['painting_time_s'] == 5.0
+    assert summary['estimate_error_ratio'] == pytest.approx(
+        (plan.time_estimate['total_s'] - 5.0) / 5.0)

@@ -37,7 +37,7 @@ def test_a_journal_reads_back_what_was_written_and_each_line_is_on_disk_at_once(
     assert not journal.truncated
     # every line is one JSON object with the documented keys
     first, *_ = [json.loads(line) for line in path.read_text().splitlines()]
-    assert set(first) == {'kind', 'goal', 'started', 'wall_started'}
+    assert set(first) == {'kind', 'goal', 'started', 'wall_started', 'dot_calibration_s'}
 
 
 def test_a_dot_line_from_before_restarts_were_counted_reads_as_none(tmp_path):

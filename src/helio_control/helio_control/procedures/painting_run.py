@@ -302,15 +302,17 @@ class PaintingRun:
         await self._refuse_what_the_sun_cannot_serve(goal)     # nor a canvas out of its reach
         resumed = None if goal.fresh else unfinished_run(settings.runs_dir, key)
         self.dot_calibration_note = ''
+        row_began = port.now()
         if resumed is None:                               # a new plan: sized as measured
             self.dot_calibration_note = await self._burn_test_row(goal, feedback)
+        row_time = port.now() - row_began                 # not the plan's: the report's
         plan, burnt, resumed_from = self._plan_or_resume(goal, resumed, await self._distances())
         painted_from = port.now()                         # the dots' time, the estimate's
         run_dir = os.path.abspath(goal.run_dir) if goal.run_dir else os.path.join(
             settings.runs_dir, datetime.datetime.fromtimestamp(port.unix_now(), UTC).strftime(
                 '%Y%m%dT%H%M%SZ'))
         self._journal = start_run(run_dir, plan.to_json(), key, burnt, resumed_from)
-        self._journal.run(goal, began, port.unix_now())
+        self._journal.run(goal, began, port.unix_now(), row_time)
         result.run_dir = run_dir
         result.dots_planned = len(plan.dots)
         result.dots_resumed = len(burnt)
