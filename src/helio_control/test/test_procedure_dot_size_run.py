@@ -111,6 +111,15 @@ def test_dots_wider_than_n_p_can_ask_for_are_held_as_the_held_test_dots_were(tmp
     # a held dot's dwell is the time to N_p 30 plus the hold, on the model's own clock
     to_30 = -wood.tau * math.log(1.0 - wood.rise_reaching(30) / wood.rise)
     assert calibration.heating_time(n_p, hold) == pytest.approx(to_30 + hold, abs=1.0)
+    # wider than the held test dots: painted, extrapolated, and the log says so
+    warnings = []
+    model = model_of(tmp_path, 'missing', row)
+    model.log.warning = lambda text, **_: warnings.append(text)
+    goal = goal_of(DOTS, tmp_path / 'runs' / 'wider')
+    goal.dot_radius = 1.05 * calibration.diameter_of(30, 12.0)
+    result, ending = run(PaintingRun(model, model.settings).execute(goal))
+    assert ending == 'succeed', result.message
+    assert any('outside what the dot-size calibration measured' in w for w in warnings)
 
 
 def test_no_row_on_a_dry_run_never_or_where_it_would_burn_into_the_goal(tmp_path):

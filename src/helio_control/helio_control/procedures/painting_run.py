@@ -237,6 +237,12 @@ class PaintingRun:
             n_p_given = goal.n_p_target > 0
             options = options_for_dot_size(options_from_goal(goal), dot_size, n_p_given)
             hold = hold_for_dot_size(options_from_goal(goal), dot_size, n_p_given)
+            if dot_size is not None and not n_p_given and not dot_size.within(
+                    options.dot_radius):
+                port.get_logger().warning(
+                    f'dots {options.dot_radius * 1e3:.2f} mm wide lie outside what the '
+                    'dot-size calibration measured: N_p target and hold extrapolated '
+                    f'(N_p {options.n_p_target}, held {hold:.0f} s)')
             heating, retreat = distances
             options.d_lp, options.retreat = heating, retreat - heating
             if (goal.cooling or settings.cooling) == 'window':
