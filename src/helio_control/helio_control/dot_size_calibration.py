@@ -54,6 +54,7 @@ class DotSample:
     diameter: float
     dwell: float
     hold: float = 0.0
+    cooling: float = 0.0         # the retreat's wait for N_p = 0 [s] (0: not measured)
 
 
 @dataclass(frozen=True)
@@ -74,6 +75,8 @@ class DotSizeCalibration:
     hold_s: tuple = ()           # the holds measured, ascending [s]
     hold_area: tuple = ()        # the mean charred area of each [m^2]
     hold_dwell_s: tuple = ()     # the mean dwell of each (reaching the target + hold) [s]
+    cooling_s: tuple = ()        # the mean wait for N_p = 0 after the retreat, per N_p target
+    hold_cooling_s: tuple = ()   # ... and per hold [s] (empty: not measured)
 
     def diameter(self, n_p):
         """Return the burnt diameter [m] of N_p target `n_p` (array or scalar)."""
@@ -142,6 +145,19 @@ class DotSizeCalibration:
             return max(0.0, float(_along(hold, holds, dwells)))
         return float(self.dwell(n_p))
 
+    def cooling(self, n_p, hold=0.0):
+        """
+        Return the retreat's wait for N_p = 0 [s] after a dot of N_p `n_p` held `hold` [s].
+
+        Interpolated between the test dots' means (held: between the holds'), the nearest
+        end's beyond them; None when the row did not measure it.
+        """
+        if hold > 0.0 and self.hold_s and len(self.hold_cooling_s) == len(self.hold_s):
+            return float(np.interp(hold, self.hold_s, self.hold_cooling_s))
+        if len(self.cooling_s) != len(self.dwell_n_p):
+            return None
+        return float(np.interp(n_p, self.dwell_n_p, self.cooling_s))
+
     def within(self, diameter):
         """Return whether `diameter` [m] lies within the diameters the fit measured."""
         low, high = self.diameter([self.n_p_min, self.n_p_max])
@@ -158,11 +174,13 @@ class DotSizeCalibration:
     @classmethod
     def from_parameters(cls, values):
         """Build from ``to_parameters`` values; ValueError naming a missing or bad one."""
-        optional = ('hold_n_p', 'hold_s', 'hold_area', 'hold_dwell_s')   # since held dots
+        optional = ('hold_n_p', 'hold_s', 'hold_area', 'hold_dwell_s', 'cooling_s',
+                    'hold_cooling_s')                           # since held dots
         try:
             fields = {name: values[name] for name in cls.__dataclass_fields__
                       if name not in optional or name in values}
-            for name in ('dwell_n_p', 'dwell_s', 'hold_s', 'hold_area', 'hold_dwell_s'):
+            for name in ('dwell_n_p', 'dwell_s', 'hold_s', 'hold_area', 'hold_dwell_s',
+                         'cooling_s', 'hold_cooling_s'):
                 if name in fields:
                     fields[name] = tuple(float(v) for v in fields[name])
             calibration = cls(**fields)
@@ -253,6 +271,11 @@ def fit_dot_size(samples):
     residual = diameter - fitted
     mean_dwell = np.interp(n_p, targets, dwells)
     holds = _fit_holds(held, targets[-1], float(a + b * targets[-1]), dwells[-1])
+    coolings = _mean_coolings(usable, targets, lambda s: s.n_p_target)
+    if coolings:
+        holds['cooling_s'] = coolings
+        if held:
+            holds['hold_cooling_s'] = _mean_coolings(held, holds['hold_s'], lambda s: s.hold)
     return DotSizeCalibration(
         area_intercept=float(a), area_per_n_p=float(b),
         dwell_n_p=tuple(float(t) for t in targets), dwell_s=tuple(dwells),
@@ -261,6 +284,17 @@ def fit_dot_size(samples):
         residual_max=float(np.max(np.abs(residual))),
         dwell_residual_rms=float(np.sqrt(np.mean((dwell - mean_dwell) ** 2))),
         samples=len(usable) + len(held), **holds)
+
+
+def _mean_coolings(samples, groups, group_of):
+    """Return the mean measured cooling of each group, () when a group has none."""
+    means = []
+    for group in groups:
+        waited = [s.cooling for s in samples if group_of(s) == group and s.cooling > 0.0]
+        if not waited:
+            return ()
+        means.append(float(np.mean(waited)))
+    return tuple(means)
 
 
 def _fit_holds(held, n_p_max, area_at_max, dwell_at_max):
@@ -304,7 +338,7 @@ def samples_from_journal(journal):
     verdict: a test dot is judged against a guess of its size, its diameter is what counts.
     """
     return [DotSample(int(dot.n_p_target), float(dot.measured_diameter), float(dot.dwell),
-                      float(dot.hold))
+                      float(dot.hold), float(dot.cooling))
             for dot in journal.dots
             if dot.outcome == 'burnt' and dot.measured_diameter > 0.0]
 

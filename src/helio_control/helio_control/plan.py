@@ -340,6 +340,9 @@ def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
     n_p = np.full(len(points), options.n_p_target, dtype=int) if n_p_targets is None else \
         np.asarray(n_p_targets, dtype=int)
     model, limits = cycle or load_cycle_config()
+    measured_cooling = None if dot_size is None else dot_size.cooling(options.n_p_target, hold)
+    if measured_cooling is not None:                  # the rig's own, from the test row
+        model = replace(model, cooling_s=measured_cooling)
     parameters = asdict(options)
     if dot_size is not None:
         parameters['dot_size'] = dot_size.to_parameters()

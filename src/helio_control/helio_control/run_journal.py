@@ -16,7 +16,8 @@ The run journal: what a painting did, one JSON object per line, written as it ha
    verified), ``verdict_reason`` why not, ``measured_diameter`` the char's equivalent
    diameter it measured [m] (0 without char), ``reheats`` the heatings again of a dot the
    camera found not charred, ``hold`` how long [s] the dot was to be held at its N_p
-   target once reached (a dot wider than N_p can ask for); absent in older journals);
+   target once reached (a dot wider than N_p can ask for), ``cooling`` the retreat's wait
+   for N_p = 0 [s]; absent in older journals);
 3. ``{"kind": "result", "success", "dots_burnt", "dots_skipped", "duration",
    "wall_duration", "message"}`` at the end.
 
@@ -99,6 +100,7 @@ class DotRecord:
     measured_diameter: float = 0.0   # the char the camera measured at the target [m]
     reheats: int = 0            # heatings again of a dot the camera found not charred
     hold: float = 0.0           # [s] held at N_p >= n_p_target once reached (dot_cycle)
+    cooling: float = 0.0        # [s] the retreat's wait for N_p = 0 (0: none or not waited)
     kind: str = field(default='dot', init=False)
 
     def validate(self):
@@ -115,7 +117,8 @@ class DotRecord:
         if self.verdict not in VERDICTS:
             raise JournalError(f'{record}: verdict must be one of {VERDICTS}, not '
                                f'{self.verdict!r}')
-        for name in ('start', 'end', 'dwell', 't_max', 'measured_diameter', 'hold'):
+        for name in ('start', 'end', 'dwell', 't_max', 'measured_diameter', 'hold',
+                     'cooling'):
             setattr(self, name, _number(record, name, getattr(self, name)))
         if self.outcome not in OUTCOMES:
             raise JournalError(f'{record}: outcome must be one of {OUTCOMES}, not '

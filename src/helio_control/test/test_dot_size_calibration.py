@@ -208,3 +208,24 @@ def test_held_dots_that_do_not_grow_or_at_another_target_are_refused():
     assert [(goal.n_p_target, goal.hold) for goal in calibration_row(
         (10, 20, 30), 1, (0.06, 0.14), 0.005, holds=(0.0, 15.0))] == [
             (10, 0.0), (20, 0.0), (30, 0.0), (30, 15.0)]
+
+
+def test_the_rows_measured_cooling_replaces_the_cycle_models_in_the_plan():
+    # a Lepton in high gain counts pixels above 140 degC: its N_p takes longer back to 0
+    # than the cycle model's 3.1 s (the paper's camera); the row's own waits are used
+    samples = [replace(sample, cooling=2.0 + 0.1 * sample.n_p_target)
+               for sample in law_samples(targets=(10, 20, 30), noise=0.0)]
+    samples += [DotSample(30, 2.2e-3, 60.0, 20.0, 7.0)] * 2
+    calibration = fit_dot_size(samples)
+    assert calibration.cooling_s == pytest.approx((3.0, 4.0, 5.0))
+    assert calibration.cooling(25) == pytest.approx(4.5)
+    assert calibration.cooling(30, 20.0) == pytest.approx(7.0)
+    points = np.array([[0.06 + 0.004 * i, 0.08] for i in range(3)])
+    options = options_for_dot_size(replace(load_plan_options(), dot_radius=0.0018),
+                                   calibration)
+    plan = plan_dots(points, options, dot_size=calibration)
+    assert plan.parameters['cycle_model']['cooling_s'] == pytest.approx(
+        2.0 + 0.1 * options.n_p_target)
+    # a row that measured no cooling (the window rule, older files) leaves the model's
+    unmeasured = fit_dot_size(law_samples(noise=0.0))
+    assert unmeasured.cooling_s == () and unmeasured.cooling(30) is None

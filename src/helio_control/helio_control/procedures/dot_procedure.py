@@ -42,6 +42,8 @@ focal calibration, else its parameter) and the retreat distance (that plus its
 ``DotProcedure`` talks to the rig only through a ``PainterRigPort``. Pure Python: no rclpy.
 """
 
+import math
+
 from helio_control.dot_cycle import CycleSettings, Decision, DotCycle
 from helio_control.procedures.painter_port import HEAT, PaintCanceled, PaintFailed, RETREAT
 from helio_optics.geometry import invert_transform
@@ -220,7 +222,7 @@ class DotProcedure:
         record = {'index': int(index), 'target': [float(target[0]), float(target[1])],
                   'n_p_target': n_p_target, 'start': start, 'end': start, 'dwell': 0.0,
                   'peak_n_p': 0, 't_max': -273.15, 'outcome': 'burnt', 'reason': '',
-                  'restarts': 0, 'hold': float(hold)}
+                  'restarts': 0, 'hold': float(hold), 'cooling': 0.0}
         if dry_run:
             feedback.phase = 'moving'
             port.publish_feedback(feedback)
@@ -301,6 +303,8 @@ class DotProcedure:
             port.publish_feedback(feedback)
             decision = cycle.update(port.now(), n_p, t_max, stats.camera_cap)
         record['end'] = port.now()
+        if math.isfinite(cycle.cooling_time):
+            record['cooling'] = float(cycle.cooling_time)
         return record
 
     async def _hold(self, feedback, record, cycle, n_p_target, window):

@@ -92,7 +92,8 @@ async def burn_test_row(dot, feedback, settings, row, say):
         say(f"test dot {index + 1} (N_p {n_p}{held}): {record['outcome']}, "
             f"{measured * 1e3:.2f} mm in {record['dwell']:.1f} s")
         if record['outcome'] == 'burnt' and measured > 0.0:
-            samples.append(DotSample(n_p, measured, float(record['dwell']), hold))
+            samples.append(DotSample(n_p, measured, float(record['dwell']), hold,
+                                     float(record.get('cooling', 0.0))))
     try:
         calibration = fit_dot_size(samples)
     except DotCalibrationError as error:
