@@ -66,7 +66,7 @@ def test_bad_parameters_are_named():
 
 
 def test_the_heat_a_dot_leaves_shortens_the_next_ones_heating_by_its_distance():
-    model = CycleModel(preheat_share=0.4, preheat_reach=0.004)
+    model = CycleModel(preheat_share=0.4, preheat_reach=0.004, preheat_onset_s=3.0)
     # 1 - 0.4 exp(-(r / 4 mm)^2): at 0, 4 mm, 8 mm; none before (inf, NaN): a dot alone
     assert model.preheat_factor([0.0, 0.004, 0.008, np.inf, np.nan]) == pytest.approx(
         [0.6, 1.0 - 0.4 / np.e, 1.0 - 0.4 * np.exp(-4.0), 1.0, 1.0])
@@ -74,5 +74,10 @@ def test_the_heat_a_dot_leaves_shortens_the_next_ones_heating_by_its_distance():
     alone = estimate_time(model, [30, 30], [0.5, 0.5], [0.5, 0.5], [1.0])
     after = estimate_time(model, [30, 30], [0.5, 0.5], [0.5, 0.5], [1.0],
                           previous_distance=[np.inf, 0.004])
+    # the first 3 s (the hot spot forming) are not shortened, the rest is
     assert alone['heating_s'] - after['heating_s'] == pytest.approx(
-        0.4 / np.e * float(model.heating_time(30)))
+        0.4 / np.e * (float(model.heating_time(30)) - 3.0))
+    short = estimate_time(model, [30, 30], [0.5, 0.5], [0.5, 0.5], [1.0],
+                          previous_distance=[np.inf, 0.0],
+                          heating_time=lambda n_p: np.full(len(n_p), 2.0))
+    assert short['heating_s'] == pytest.approx(4.0)    # a dot under the onset: as alone

@@ -131,11 +131,12 @@ def test_a_plan_burns_and_times_its_dots_by_the_calibration():
     plan = plan_dots(points, sized, dot_size=calibration)
     assert list(plan.n_p_targets) == [49] * 4
     # the first dot alone, each later one 4 mm after the one before: its heat left in the
-    # wood shortens the dwell by share x exp(-(4 mm / reach)^2)
+    # wood shortens the dwell past the onset by share x exp(-(4 mm / reach)^2)
     model, _ = load_cycle_config()
     left = 1.0 - model.preheat_share * math.exp(-(0.004 / model.preheat_reach) ** 2)
+    dwell = float(calibration.dwell(49))
     assert plan.time_estimate['heating_s'] == pytest.approx(
-        (1 + 3 * left) * float(calibration.dwell(49)))
+        dwell + 3 * (model.preheat_onset_s + (dwell - model.preheat_onset_s) * left))
     expected, _ = expected_dot(plan, 0)
     assert expected == pytest.approx(2.5e-3, rel=0.01)
     # without it, today's plan: N_p 30, the cycle model's heating, 2.5 mm expected at N_p 30
