@@ -148,3 +148,26 @@ def test_a_row_on_the_canvas_or_near_the_points_is_refused_with_where():
     with pytest.raises(ValueError, match='calibrate_dots must be one of'):
         needs_test_row('sometimes', False, False)
     assert dot_size_run.clearance_of(0.005, 0.002) == pytest.approx(0.01)
+
+
+def test_a_target_out_of_the_cameras_reach_ends_the_row_and_the_holds_take_the_last_reached(
+        tmp_path):
+    # the model's N_p levels off below 49 (its rise settles at G = 300 K): N_p 60 is never
+    # reached; its first test dot is given up at max_heating, its second is not tried, and
+    # the held dots are held at 30, the largest target reached
+    row = DotRowSettings(n_p_targets=(10, 20, 30, 60), per_target=2, start=(0.05, 0.10),
+                         pitch=0.006, holds=(6.0,))
+    model = model_of(tmp_path, 'always', row)
+    said = []
+    model.log.info = lambda text, **_: said.append(text)
+    goal = goal_of(DOTS, tmp_path / 'runs' / 'reach')
+    result, ending = run(PaintingRun(model, model.settings).execute(goal))
+    assert ending == 'succeed' and result.success, result.message
+    points = [p for goal in row.row() for p in goal.points]
+    heated = [tuple(round(v, 6) for v in target) for target, _, _ in model.heatings]
+    tried = [pytest.approx(p) for p in points[:7]] + [pytest.approx(p) for p in points[8:]]
+    assert heated[:9] == tried                          # the second N_p-60 dot left out
+    assert any('test dots 8-8 left out: N_p 60 was not reached' in line for line in said)
+    calibration = load_dot_calibration(model.settings.calibration_dir, '')
+    assert calibration.n_p_max == 30 and calibration.hold_n_p == 30
+    assert calibration.hold_s == (6.0,)

@@ -78,22 +78,51 @@ async def burn_test_row(dot, feedback, settings, row, say):
     Burn, measure and fit the test `row` (RowGoals); save dots.yaml; return (fit, note).
 
     `dot` is the painting's DotProcedure (its checks, retreats and camera look), `say(text)`
-    logs a line. The fit is None, and the note says why, when there is no calibration.
+    logs a line. An N_p target that a test dot cannot reach within ``max_heating`` (a camera
+    whose pixels see less of the hot spot: a Lepton in low gain stops near N_p 25) ends the
+    unheld part of the row there, and the held dots are held at the largest target a test
+    dot burnt to. The fit is None, and the note says why, when there is no calibration.
     """
     samples = []
-    tests = [(goal.n_p_target, goal.hold, point) for goal in row for point in goal.points]
-    for index, (n_p, hold, point) in enumerate(tests):
-        dot.check()
-        feedback.phase = 'calibrating_dots'
-        record = await dot.paint(feedback, index, np.array(point, dtype=float), n_p, 'paper',
-                                 False, False, guessed_diameter(n_p), (), hold=hold)
-        measured = float(record.get('measured_diameter', 0.0))
-        held = f', held {hold:g} s' if hold else ''
-        say(f"test dot {index + 1} (N_p {n_p}{held}): {record['outcome']}, "
-            f"{measured * 1e3:.2f} mm in {record['dwell']:.1f} s")
-        if record['outcome'] == 'burnt' and measured > 0.0:
-            samples.append(DotSample(n_p, measured, float(record['dwell']), hold,
-                                     float(record.get('cooling', 0.0))))
+    reached = None            # the largest N_p target all of whose test dots burnt
+    out_of_reach = None       # the first N_p target a test dot could not reach
+    index = 0
+    for goal in row:
+        n_p, hold = goal.n_p_target, goal.hold
+        if hold > 0.0:
+            n_p = reached
+        skip = ('no N_p target was reached' if n_p is None else
+                f'N_p {out_of_reach} was not reached' if not hold and out_of_reach is not None
+                and n_p >= out_of_reach else '')
+        if skip:
+            say(f'test dots {index + 1}-{index + len(goal.points)} left out: {skip}')
+            index += len(goal.points)
+            continue
+        any_burnt = False
+        for k, point in enumerate(goal.points):
+            index += 1
+            dot.check()
+            feedback.phase = 'calibrating_dots'
+            record = await dot.paint(feedback, index - 1, np.array(point, dtype=float), n_p,
+                                     'paper', False, False, guessed_diameter(n_p), (),
+                                     hold=hold)
+            measured = float(record.get('measured_diameter', 0.0))
+            held = f', held {hold:g} s' if hold else ''
+            say(f"test dot {index} (N_p {n_p}{held}): {record['outcome']}, "
+                f"{measured * 1e3:.2f} mm in {record['dwell']:.1f} s")
+            if record['outcome'] == 'burnt' and measured > 0.0:
+                samples.append(DotSample(n_p, measured, float(record['dwell']), hold,
+                                         float(record.get('cooling', 0.0))))
+                any_burnt = True
+            elif not hold and record['outcome'] == 'failed' and record['peak_n_p'] < n_p:
+                out_of_reach, left = n_p, len(goal.points) - k - 1
+                if left:
+                    say(f'test dots {index + 1}-{index + left} left out: N_p {n_p} was not '
+                        'reached')
+                index += left
+                break
+        if any_burnt and not hold:
+            reached = n_p if reached is None else max(reached, n_p)
     try:
         calibration = fit_dot_size(samples)
     except DotCalibrationError as error:
