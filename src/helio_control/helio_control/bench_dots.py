@@ -70,10 +70,12 @@ MAX_OFFSET_RATIO = 0.5       # char_dots.CharSettings.max_offset_ratio (the pain
 # the deliberate failures: a few dots 4 mm apart inside the default canvas (0.05-0.13 m)
 FAILURE_POINTS = tuple((0.080 + 0.004 * i, 0.090) for i in range(6))
 BRIEF_POINTS = tuple((0.080 + 0.004 * i, 0.100) for i in range(3))
-# complete clouds (start_s, end_s) since the world's start: the first dot of a goal of points
-# begins ~95 s after the world's start (the sun sweep, the world calibration), a dot's cycle
-# takes ~18 s, so each lands in some dot's cycle (where: read back from the journal)
-CLOUDS = ((140.0, 150.0), (205.0, 215.0))
+# complete clouds (start_s, end_s) since the world's start. In a run of the sample word
+# (2026-11-28) the first dot began 105 s after the world's start (the sun sweep and the world
+# calibration before it: a cloud there may stop the painting) and a dot took 16-23 s, 11-17 s
+# of it heating; three clouds 35 s apart from 150 s, so that one at least lands in a heating
+# (where each began: read back from the journal and printed)
+CLOUDS = ((150.0, 160.0), (185.0, 195.0), (220.0, 230.0))
 SUMMARY_FIELDS = ('success', 'message', 'dots_planned', 'dots_burnt', 'dots_failed',
                   'measured_per', 'charred_dots_seen', 'dots_without_char', 'diameter_mean_m',
                   'diameter_cv', 'painting_time_s', 'plan_estimate_s', 'estimate_error_ratio',
@@ -391,7 +393,7 @@ def row(figures):
         verdicts += f" disagree at {figures['disagreeing']}"
     what = 'painted' if figures.get('painted') else 'NOT painted'
     head = f"{figures['label']:30s} {what:11s}"
-    wall = f"wall {_number(figures.get('wall_s'), digits=0)} s"
+    wall = f"wall {_number(figures.get('wall_s') or figures.get('wall_time_s'), digits=0)} s"
     if figures.get('kind') == 'sized':
         verdict = {True: 'PASS', False: 'FAIL'}[bool(figures.get('passed'))]
         line = (f"{head} {dots}; mean {_number(figures.get('diameter_mean_m'), 1e3)} mm "
