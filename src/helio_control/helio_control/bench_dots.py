@@ -357,8 +357,24 @@ def measure_run(run_dir, figures, min_diameter_ratio=MIN_DIAMETER_RATIO):
     return figures
 
 
+def set_aside(run_dir):
+    """
+    Rename an earlier run in `run_dir` to ``<run_dir>.<UTC time>``; return the new name or None.
+
+    A painting that dies before its report would otherwise leave the earlier run's
+    ``summary.json`` to be read as its own.
+    """
+    if not os.path.isdir(run_dir) or not os.listdir(run_dir):
+        return None
+    stamp = datetime.datetime.now(datetime.timezone.utc).strftime('%Y%m%dT%H%M%SZ')
+    aside = f'{run_dir.rstrip(os.sep)}.{stamp}'
+    os.rename(run_dir, aside)
+    return aside
+
+
 def paint(run_dir, command, timeout):
     """Run one painting; return its figures (exit, wall time, why not painted)."""
+    set_aside(run_dir)
     started = time.monotonic()
     os.makedirs(os.path.dirname(run_dir) or '.', exist_ok=True)
     try:

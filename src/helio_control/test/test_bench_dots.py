@@ -211,6 +211,16 @@ def test_where_a_cloud_fell_is_read_from_the_journal(tmp_path):
     assert after['dot'] is None and 'after the last dot' in after['where']
 
 
+def test_an_earlier_run_is_set_aside_not_read_as_the_new_one(tmp_path):
+    (tmp_path / 'paper_2.00mm').mkdir()
+    run = write_run(tmp_path / 'paper_2.00mm')
+    aside = bench_dots.set_aside(str(run))
+    assert not run.exists()
+    assert json.loads((tmp_path / aside).joinpath('summary.json').read_text())['success']
+    run.mkdir()
+    assert bench_dots.set_aside(str(run)) is None and run.is_dir()     # empty: left
+
+
 def test_the_worlds_start_from_a_set():
     start = bench_dots.world_start(['sim_world.start_time=2026-06-21T10:00:00+02:00'])
     assert start == datetime.datetime(2026, 6, 21, 8, tzinfo=datetime.timezone.utc).timestamp()
