@@ -53,6 +53,7 @@ import datetime
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -377,14 +378,21 @@ def paint(run_dir, command, timeout):
     set_aside(run_dir)
     started = time.monotonic()
     os.makedirs(os.path.dirname(run_dir) or '.', exist_ok=True)
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
     try:
-        done = subprocess.run(command, capture_output=True, text=True, timeout=timeout)
-        exit_code, stderr = done.returncode, done.stderr
-    except subprocess.TimeoutExpired as error:
-        exit_code = None
-        stderr = (error.stderr or b'').decode('utf-8', 'replace') \
-            if isinstance(error.stderr, bytes) else (error.stderr or '')
-        stderr += f'\n[helio] timed out after {timeout:g} s'
+        _, stderr = process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        # Ctrl-C's path: helio cancels the goal and stops the graph it started (a kill
+        # would leave its nodes running)
+        process.send_signal(signal.SIGINT)
+        try:
+            _, stderr = process.communicate(timeout=120.0)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            _, stderr = process.communicate()
+        stderr = (stderr or '') + f'\n[helio] timed out after {timeout:g} s'
+    exit_code = process.returncode
     figures = {'run_dir': run_dir, 'exit': exit_code, 'wall_s': time.monotonic() - started,
                'painted': False}
     if read_summary(run_dir) is None:

@@ -10,6 +10,7 @@ verdict of each is known without the code under test.
 
 import datetime
 import json
+import sys
 
 import cv2
 from helio_control import bench_dots
@@ -219,6 +220,23 @@ def test_an_earlier_run_is_set_aside_not_read_as_the_new_one(tmp_path):
     assert json.loads((tmp_path / aside).joinpath('summary.json').read_text())['success']
     run.mkdir()
     assert bench_dots.set_aside(str(run)) is None and run.is_dir()     # empty: left
+
+
+def test_a_painting_that_fails_says_why(tmp_path):
+    command = [sys.executable, '-c', 'import sys; print("[helio] no painter answers", '
+               'file=sys.stderr); sys.exit(1)']
+    figures = bench_dots.paint(str(tmp_path / 'run'), command, 60.0)
+    assert figures['exit'] == 1 and not figures['painted']
+    assert figures['message'] == '[helio] no painter answers'
+
+
+def test_a_painting_past_its_timeout_is_interrupted_as_ctrl_c_would(tmp_path):
+    command = [sys.executable, '-c', 'import time\ntry:\n    time.sleep(60)\n'
+               'except KeyboardInterrupt:\n    print("[helio] canceled", flush=True)\n'
+               '    raise SystemExit(130)']
+    figures = bench_dots.paint(str(tmp_path / 'run'), command, 3.0)
+    assert figures['exit'] == 130 and figures['wall_s'] < 50.0      # not the minute slept
+    assert figures['message'] == '[helio] timed out after 3 s'
 
 
 def test_the_worlds_start_from_a_set():
