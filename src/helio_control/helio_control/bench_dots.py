@@ -81,7 +81,7 @@ SUMMARY_FIELDS = ('success', 'message', 'dots_planned', 'dots_burnt', 'dots_fail
                   'measured_per', 'charred_dots_seen', 'dots_without_char', 'diameter_mean_m',
                   'diameter_cv', 'painting_time_s', 'plan_estimate_s', 'estimate_error_ratio',
                   'mean_dwell_s', 'dots_verified_by_camera', 'dots_camera_not_charred',
-                  'wall_time_s')
+                  'dot_calibration_time_s', 'wall_time_s')
 SLACK = 1e-9                 # a figure at a bound passes
 
 
