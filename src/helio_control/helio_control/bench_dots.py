@@ -485,7 +485,7 @@ def plans(arguments):
         sets = profile_sets('paper') + [f'sim_world.cloud_schedule=[{schedule}]']
         paintings.append(('failures: cloud mid-dot', 'cloud', 'paper', None, 'failures_cloud',
                           ('', list(FAILURE_POINTS), 0.0, sets + list(arguments.set))))
-        sets = profile_sets('paper') + [f'painter.max_heating={arguments.brief_heating:g}']
+        sets = profile_sets('paper') + [f'painter.max_heating={float(arguments.brief_heating)!r}']
         paintings.append(('failures: heated too briefly', 'brief', 'paper', None,
                           'failures_brief',
                           ('', list(BRIEF_POINTS), 0.0, sets + list(arguments.set))))
