@@ -53,6 +53,7 @@ import datetime
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -398,7 +399,26 @@ def paint(run_dir, command, timeout):
     if read_summary(run_dir) is None:
         lines = [line for line in stderr.splitlines() if line.startswith('[helio]')]
         figures['message'] = lines[-1] if lines else stderr[-300:]
+        cause = error_in_logs(run_dir)
+        if cause:
+            figures['message'] += f' ({cause})'
     return figures
+
+
+def error_in_logs(run_dir):
+    """Return the first node log's last exception line ('node: line'), or '' without one."""
+    logs = os.path.join(run_dir, 'logs')
+    try:
+        names = sorted(name for name in os.listdir(logs) if name.endswith('.log'))
+    except OSError:
+        return ''
+    for name in names:
+        with open(os.path.join(logs, name), errors='replace') as stream:
+            found = [line.strip() for line in stream
+                     if re.match(r'^[\w.]+(Error|Exception): ', line.strip())]
+        if found:
+            return f'{name[:-4]}: {found[-1]}'
+    return ''
 
 
 def _number(value, scale=1.0, digits=2, sign=False):

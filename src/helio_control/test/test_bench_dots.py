@@ -258,3 +258,17 @@ def test_the_pooled_agreement_and_its_bound():
     assert bench_dots.final_summary(runs)['agreement_passed'] is True
     text = '\n'.join(bench_dots.summary_lines(summary))
     assert '96.0 % of 50 dots' in text and 'NOT met' in text
+
+
+def test_a_painting_that_failed_at_start_names_the_exception_in_the_node_logs(tmp_path):
+    logs = tmp_path / 'logs'
+    logs.mkdir()
+    (logs / 'lens_planner.log').write_text('[INFO] [lens_planner]: ready\n')
+    (logs / 'painter.log').write_text(
+        'Traceback (most recent call last):\n  File "node.py", line 584\n'
+        'rclpy.exceptions.InvalidParameterTypeException: Trying to set parameter '
+        "'max_heating' to '2' of type 'INTEGER', expecting type 'DOUBLE': max_heating\n")
+    assert bench_dots.error_in_logs(str(tmp_path)) == (
+        'painter: rclpy.exceptions.InvalidParameterTypeException: Trying to set parameter '
+        "'max_heating' to '2' of type 'INTEGER', expecting type 'DOUBLE': max_heating")
+    assert bench_dots.error_in_logs(str(tmp_path / 'none')) == ''
