@@ -13,7 +13,7 @@ diameter is the calibration's for the dot's N_p target instead: what the camera 
 
 import math
 
-from helio_control.dot_size_calibration import DotSizeCalibration
+from helio_control.dot_size_calibration import DotSizeCalibration, held_dots
 import numpy as np
 
 # targets within this many expected diameters of a dot are its neighbours
@@ -39,10 +39,8 @@ def dot_hold(plan, index):
     holds the dots at the plan's full ``n_p_target``; lighter tones are not held.
     """
     parameters = plan.parameters
-    hold = float(parameters.get('hold_s') or 0.0)
-    if hold > 0.0 and int(plan.n_p_targets[index]) == int(parameters.get('n_p_target', -1)):
-        return hold
-    return 0.0
+    return float(held_dots(plan.n_p_targets[index], parameters.get('n_p_target', -1),
+                           parameters.get('hold_s') or 0.0))
 
 
 def expected_dot(plan, index):

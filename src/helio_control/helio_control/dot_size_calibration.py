@@ -99,23 +99,16 @@ class DotSizeCalibration:
         world's 15.3 and 48.5 s at N_p 30 and 40; its dots burnt alone at N_p 33 took 19-21 s,
         a linear interpolation says 25 s, this 21.6 s).
         """
-        n_p = np.asarray(n_p, dtype=float)
-        x = np.asarray(self.dwell_n_p, dtype=float)
-        y = np.log(np.asarray(self.dwell_s, dtype=float))
-        low = y[0] + (n_p - x[0]) * (y[1] - y[0]) / (x[1] - x[0])
-        high = y[-1] + (n_p - x[-1]) * (y[-1] - y[-2]) / (x[-1] - x[-2])
-        inside = np.interp(n_p, x, y)
-        return np.exp(np.where(n_p < x[0], low, np.where(n_p > x[-1], high, inside)))
+        log_dwell = np.log(np.asarray(self.dwell_s, dtype=float))
+        return np.exp(_along(n_p, self.dwell_n_p, log_dwell))
 
-    def _hold_curve(self, values):
-        """Return the holds (0 first) and `values` at them, (None, None) without held dots."""
-        if not self.hold_s:
-            return None, None
-        return (np.array((0.0,) + tuple(self.hold_s)), np.asarray(values, dtype=float))
+    def _holds(self):
+        """Return the holds measured with no hold first [s] (held dots only)."""
+        return (0.0,) + tuple(self.hold_s)
 
-    def _held_area(self, hold):
-        x, y = self._hold_curve((float(self.diameter(self.hold_n_p)) ** 2,) + self.hold_area)
-        return float(_along(hold, x, y))
+    def _held_areas(self):
+        """Return the charred area [m^2] at each of ``_holds``: the N_p law's, then measured."""
+        return (float(self.diameter(self.hold_n_p)) ** 2,) + tuple(self.hold_area)
 
     def dot_for(self, diameter):
         """
@@ -127,22 +120,20 @@ class DotSizeCalibration:
         n_p = self.n_p_target(diameter)
         if not self.hold_s or diameter <= float(self.diameter(self.n_p_max)):
             return n_p, 0.0
-        area0 = float(self.diameter(self.hold_n_p)) ** 2
-        holds, areas = self._hold_curve((area0,) + self.hold_area)
-        return self.hold_n_p, max(0.0, float(_along(diameter * diameter, areas, holds)))
+        return self.hold_n_p, max(0.0, float(_along(diameter * diameter, self._held_areas(),
+                                                    self._holds())))
 
     def diameter_of(self, n_p, hold=0.0):
         """Return the burnt diameter [m] of N_p target `n_p` held `hold` [s] at it."""
         if hold > 0.0 and self.hold_s:
-            return math.sqrt(max(self._held_area(hold), 0.0))
+            return math.sqrt(max(float(_along(hold, self._holds(), self._held_areas())), 0.0))
         return float(self.diameter(n_p))
 
     def heating_time(self, n_p, hold=0.0):
         """Return the heating time [s] of N_p target `n_p` held `hold` [s] (at least 0)."""
         if hold > 0.0 and self.hold_s:
-            holds, dwells = self._hold_curve((float(self.dwell(self.hold_n_p)),)
-                                             + self.hold_dwell_s)
-            return max(0.0, float(_along(hold, holds, dwells)))
+            dwells = (float(self.dwell(self.hold_n_p)),) + tuple(self.hold_dwell_s)
+            return max(0.0, float(_along(hold, self._holds(), dwells)))
         return float(self.dwell(n_p))
 
     def cooling(self, n_p, hold=0.0):
@@ -219,13 +210,22 @@ class DotSizeCalibration:
 
 
 def _along(x, xs, ys):
-    """Interpolate ys(xs) at x linearly; beyond either end along the end segment."""
+    """Interpolate ys(xs) at x (array or scalar) linearly; beyond an end along its segment."""
+    x = np.asarray(x, dtype=float)
     xs, ys = np.asarray(xs, dtype=float), np.asarray(ys, dtype=float)
-    if x < xs[0]:
-        return ys[0] + (x - xs[0]) * (ys[1] - ys[0]) / (xs[1] - xs[0])
-    if x > xs[-1]:
-        return ys[-1] + (x - xs[-1]) * (ys[-1] - ys[-2]) / (xs[-1] - xs[-2])
-    return float(np.interp(x, xs, ys))
+    low = ys[0] + (x - xs[0]) * (ys[1] - ys[0]) / (xs[1] - xs[0])
+    high = ys[-1] + (x - xs[-1]) * (ys[-1] - ys[-2]) / (xs[-1] - xs[-2])
+    return np.where(x < xs[0], low, np.where(x > xs[-1], high, np.interp(x, xs, ys)))
+
+
+def held_dots(n_p_targets, full_target, hold):
+    """
+    Return each dot's hold [s] at its N_p target (an array).
+
+    `hold` for the dots at the plan's full `full_target` (a dot wider than N_p can ask
+    for), none for lighter tones.
+    """
+    return np.where(np.asarray(n_p_targets) == int(full_target), float(hold), 0.0)
 
 
 def fit_dot_size(samples):
@@ -378,23 +378,21 @@ def options_for_dot_size(options, calibration, n_p_given=False):
     who asks for N_p). ``n_p_min`` (the lightest tone's N_p) is kept at most that target.
     Without a calibration, the options as they are.
     """
-    from dataclasses import replace
-    if calibration is None or n_p_given:
-        return replace(options)
-    n_p, _ = calibration.dot_for(float(options.dot_radius))
-    return replace(options, n_p_target=n_p, n_p_min=min(int(options.n_p_min), n_p))
+    return sized_options(options, calibration, n_p_given)[0]
 
 
-def hold_for_dot_size(options, calibration, n_p_given=False):
+def sized_options(options, calibration, n_p_given=False):
     """
-    Return the hold [s] at the N_p target of ``options_for_dot_size`` (0: none).
+    Return (``options_for_dot_size``'s options, the hold [s] at their N_p target).
 
     A dot wider than the calibration's largest N_p target burns is held at that target
     (``DotSizeCalibration.dot_for``); a goal that gave its N_p target is not held.
     """
+    from dataclasses import replace
     if calibration is None or n_p_given:
-        return 0.0
-    return calibration.dot_for(float(options.dot_radius))[1]
+        return replace(options), 0.0
+    n_p, hold = calibration.dot_for(float(options.dot_radius))
+    return replace(options, n_p_target=n_p, n_p_min=min(int(options.n_p_min), n_p)), hold
 
 
 def dot_size_for_painting(directory, rig_file):

@@ -28,6 +28,7 @@ import math
 from helio_control.arm_motion import move_time
 from helio_control.cycle_model import estimate_time, load_cycle_config
 from helio_control.dot_layout import check_reach, grid_for_picture, outside_canvas, too_close
+from helio_control.dot_size_calibration import held_dots
 from helio_control.features import cell_means, extract_features, FEATURE_MODES, LINE_MODES
 from helio_control.features import working_image
 from helio_control.halftone import KERNELS
@@ -434,7 +435,7 @@ def _held_seconds(dot_size, n_p_targets, full_target, hold):
     if dot_size is None or not hold > 0.0:
         return None
     held = dot_size.heating_time(full_target, hold) - float(dot_size.dwell(full_target))
-    return np.where(np.asarray(n_p_targets) == full_target, max(held, 0.0), 0.0)
+    return held_dots(n_p_targets, full_target, max(held, 0.0))
 
 
 def _rejection(point, uv, reason):

@@ -84,7 +84,7 @@ async def burn_test_row(dot, feedback, settings, row, say):
     dot burnt to. The fit is None, and the note says why, when there is no calibration.
     """
     samples = []
-    reached = None            # the largest N_p target all of whose test dots burnt
+    reached = None            # the largest N_p target a test dot burnt to
     out_of_reach = None       # the first N_p target a test dot could not reach
     index = 0
     for goal in row:

@@ -50,7 +50,7 @@ import traceback
 from helio_control import sky
 from helio_control.dot_check import dot_hold, expected_dot
 from helio_control.dot_size_calibration import dot_size_for_painting
-from helio_control.dot_size_calibration import hold_for_dot_size, options_for_dot_size
+from helio_control.dot_size_calibration import sized_options
 from helio_control.picture_input import picture_from_image_msg, PictureError
 from helio_control.plan import options_from_goal, Plan, plan_dots, plan_picture
 from helio_control.plan import PlanError, PlanOptionsError
@@ -235,8 +235,7 @@ class PaintingRun:
             if note:
                 port.get_logger().warning(note)
             n_p_given = goal.n_p_target > 0
-            options = options_for_dot_size(options_from_goal(goal), dot_size, n_p_given)
-            hold = hold_for_dot_size(options_from_goal(goal), dot_size, n_p_given)
+            options, hold = sized_options(options_from_goal(goal), dot_size, n_p_given)
             if dot_size is not None and not n_p_given and not dot_size.within(
                     options.dot_radius):
                 port.get_logger().warning(
