@@ -136,3 +136,46 @@ def test_a_second_signal_stops_a_node_whose_on_interrupt_hangs():
     run_node(HangsOnTheWayOut, args=[])
     assert HangsOnTheWayOut.log == ['interrupted', 'destroyed']
     assert time.monotonic() - started < 30.0 and not rclpy.ok()    # not the 60 s hang
+
+
+class CtrlCInsideAConversion(Node):
+    """
+    A Ctrl-C whose KeyboardInterrupt rclpy's message conversion turned into a RuntimeError.
+
+    The timer calls the process's SIGINT handler itself, as Python does for the signal, and
+    masks its KeyboardInterrupt as pybind11 does; rclpy's own shutdown of the context (a
+    thread of its own, a moment later) has not happened: the context is still up.
+    """
+
+    def __init__(self):
+        super().__init__('helio_test_ctrl_c_inside_a_conversion')
+        self.create_timer(0.01, self._take)
+
+    def _take(self):
+        try:
+            signal.getsignal(signal.SIGINT)(signal.SIGINT, None)
+        except KeyboardInterrupt:
+            raise RuntimeError("Unable to convert call argument '0' to Python object") from None
+
+
+class FailsWhileSpinning(Node):
+    """A node with a real error in a callback, no signal anywhere."""
+
+    def __init__(self):
+        super().__init__('helio_test_fails_while_spinning')
+        self.create_timer(0.01, self._fail)
+
+    def _fail(self):
+        raise RuntimeError('a real error in a callback')
+
+
+def test_a_ctrl_c_masked_as_another_exception_is_a_normal_stop():
+    before = signal.getsignal(signal.SIGINT)
+    run_node(CtrlCInsideAConversion, args=[])          # no exception: a normal stop
+    assert not rclpy.ok() and signal.getsignal(signal.SIGINT) is before
+
+
+def test_a_callback_error_without_a_signal_reaches_the_caller():
+    with pytest.raises(RuntimeError, match='a real error in a callback'):
+        run_node(FailsWhileSpinning, args=[])
+    assert not rclpy.ok()

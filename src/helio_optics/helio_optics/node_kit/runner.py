@@ -1,6 +1,7 @@
 """The main() of every helio node: spin one node until shutdown, then clean up."""
 
 import signal
+import threading
 import time
 
 from helio_optics.node_kit.process_tuning import single_threaded_numerics
@@ -29,11 +30,19 @@ def run_node(node_class, args=None):
     SIGTERM runs ``on_interrupt`` on the node's executor, the node still up, for at most its
     ``interrupt_timeout`` seconds (default 5) of wall time, and only then the node is
     destroyed; a second signal stops it at once (`spin_until_interrupt_done`).
+
+    A Ctrl-C can also surface as another exception. rclpy's handler shuts the context down on
+    a thread of its own, a moment after Python raised KeyboardInterrupt in whatever Python
+    code ran; inside rclpy's conversion of a taken message (a message class's constructor)
+    pybind11 turns that into "Unable to convert call argument" RuntimeError while the
+    context is still up. So the process notes each SIGINT (`_SignalNote`, installed before
+    rclpy's handler, which calls it), and an exception after one is a normal stop.
     """
     single_threaded_numerics()
     safe_stop = hasattr(node_class, 'on_interrupt')
     # rclpy's own handler shuts the context down at the first signal: nothing could be
     # published after it, so a node that must act on the way out takes the signals itself
+    interrupted = _SignalNote(signal.SIGINT)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO if safe_stop
                else None)
     node = None
@@ -49,14 +58,39 @@ def run_node(node_class, args=None):
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
-        if rclpy.ok():
-            raise           # a real error (the context is still up)
+        if rclpy.ok() and not interrupted.seen:
+            raise           # a real error (the context is still up, no Ctrl-C)
     finally:
         try:
             if node is not None:
                 node.destroy_node()
         finally:
             _shut_down()
+            interrupted.restore()
+
+
+class _SignalNote:
+    """
+    A Python handler for `signum` that notes the signal, then raises KeyboardInterrupt.
+
+    Installed before rclpy.init, it is the handler rclpy's own one chains to; ``restore``
+    puts the previous handler back. Off the main thread (where Python takes no handler) it
+    notes nothing.
+    """
+
+    def __init__(self, signum):
+        self.signum, self.seen, self.previous = signum, False, None
+        if threading.current_thread() is threading.main_thread():
+            self.previous = signal.signal(signum, self._note)
+
+    def _note(self, _signum, _frame):
+        self.seen = True
+        raise KeyboardInterrupt
+
+    def restore(self):
+        if self.previous is not None:
+            signal.signal(self.signum, self.previous)
+            self.previous = None
 
 
 def spin_until_interrupt_done(node, poll_period=0.05):
