@@ -22,6 +22,8 @@ from helio_perception.ground_plane import RESPONSES
 DYNAMIC = {'max_heating': 'max_heating',
            'verify.min_diameter_ratio': 'verify_min_diameter_ratio',
            'calibrate_dots': 'calibrate_dots'}
+# the range of max_heating [s]: below a second a dot is not a dot
+MAX_HEATING_RANGE_S = (1.0, 3600.0)
 
 
 def declare_painter_parameters(node):
@@ -62,7 +64,7 @@ def declare_painter_parameters(node):
         max_heating=declare(
             node, 'max_heating', 90.0,
             'A dot held longer than this is given up (set at run time: '
-            'from the next dot on) [s].', 1.0, 3600.0, dynamic=True),
+            'from the next dot on) [s].', *MAX_HEATING_RANGE_S, dynamic=True),
         max_cooling=declare(
             node, 'max_cooling', 60.0,
             "Longest wait for N_p = 0 (paper's rule) [s].", 1.0, 3600.0),

@@ -145,6 +145,17 @@ def test_figures_past_a_bound_fail(change, failed):
     assert [name for name, ok in checks.items() if not ok] == [failed]
 
 
+def test_the_estimate_is_judged_only_at_the_pitches_the_issue_asks():
+    slow = {**AT_THE_BOUNDS, 'estimate_error_ratio': 0.127}
+    for pitch in (2.0e-3, 3.0e-3):
+        assert bench_dots.judge(slow, pitch)[0]['estimate'] is False
+    checks, passed = bench_dots.judge({**slow, 'diameter_mean_m': 1.5e-3}, 1.5e-3)
+    assert 'estimate' not in checks and passed
+    line = bench_dots.row({'label': 'paper 1.50 mm', 'kind': 'sized', 'painted': True,
+                           'checks': checks, 'passed': passed, **slow})
+    assert '+12.7 % (not judged)' in line and line.endswith('PASS')
+
+
 def test_a_figure_not_measured_is_no_pass():
     checks, passed = bench_dots.judge({**AT_THE_BOUNDS, 'diameter_cv': None}, 2.0e-3)
     assert checks['cv'] is None and not passed
@@ -160,8 +171,10 @@ def test_the_command_line():
     assert not arguments.failures and not arguments.only_failures
     assert bench_dots.parse_arguments(['--profiles', 'paper']).profiles == ['paper']
     assert bench_dots.parse_arguments(['--cloud', '100,110']).cloud == [(100.0, 110.0)]
+    assert bench_dots.parse_arguments(['--brief-heating', '1']).brief_heating == 1.0
     for wrong in (['--profiles', 'paper,flir'], ['--diameters', '2,-1'],
-                  ['--diameters', 'two'], ['--cloud', '110,100']):
+                  ['--diameters', 'two'], ['--cloud', '110,100'],
+                  ['--brief-heating', '0.5']):     # the painter refuses a max_heating < 1 s
         with pytest.raises(SystemExit):
             bench_dots.parse_arguments(wrong)
 
