@@ -368,25 +368,17 @@ def load_dot_calibration(directory, description):
         raise CalibrationRefused(f'{directory}/{DOTS_FILE}: {error}') from None
 
 
-def options_for_dot_size(options, calibration, n_p_given=False):
-    """
-    Return plan options whose ``n_p_target`` burns dots ``dot_radius`` wide (a copy).
-
-    With a calibration, the goal's ``dot_radius`` (the paper's r_p, which the plan uses as
-    the pitch and the width of a dot) is the burnt dot's diameter: the N_p target is the
-    calibration's for it, unless the goal gave one (`n_p_given`: a test dot's, or a user
-    who asks for N_p). ``n_p_min`` (the lightest tone's N_p) is kept at most that target.
-    Without a calibration, the options as they are.
-    """
-    return sized_options(options, calibration, n_p_given)[0]
-
-
 def sized_options(options, calibration, n_p_given=False):
     """
-    Return (``options_for_dot_size``'s options, the hold [s] at their N_p target).
+    Return (options burning dots ``dot_radius`` wide, the hold [s] at their N_p target).
 
-    A dot wider than the calibration's largest N_p target burns is held at that target
-    (``DotSizeCalibration.dot_for``); a goal that gave its N_p target is not held.
+    The options are a copy. With a calibration, the goal's ``dot_radius`` (the paper's r_p,
+    which the plan uses as the pitch and the width of a dot) is the burnt dot's diameter:
+    the N_p target is the calibration's for it, unless the goal gave one (`n_p_given`: a
+    test dot's, or a user who asks for N_p). ``n_p_min`` (the lightest tone's N_p) is kept
+    at most that target. A dot wider than the calibration's largest N_p target burns is
+    held at that target (``DotSizeCalibration.dot_for``); a goal that gave its N_p target
+    is not held (hold 0). Without a calibration, the options as they are and no hold.
     """
     from dataclasses import replace
     if calibration is None or n_p_given:

@@ -324,7 +324,7 @@ def plan_dots(points, options=None, rig=None, sun_ray_robot=None, grid_uv=None,
     Dots outside the canvas, closer than the pitch r_p to an earlier dot, or unreachable
     for the sun are rejected with a reason (``Plan.rejected``), never dropped silently. With
     `dot_size` (a ``DotSizeCalibration``; the N_p targets already its, see
-    ``dot_size_calibration.options_for_dot_size``) the time estimate heats each dot for the
+    ``dot_size_calibration.sized_options``) the time estimate heats each dot for the
     calibration's measured dwell, and the plan's ``parameters['dot_size']`` keeps the law
     (the camera then expects each dot at the law's diameter, ``dot_check``). `hold` [s]:
     the dots at the full N_p target are held there that long (``dot_check.dot_hold``, a

@@ -14,7 +14,7 @@ from helio_control.cycle_model import load_cycle_config
 from helio_control.dot_check import expected_dot
 from helio_control.dot_size_calibration import (
     calibration_row, dot_size_for_painting, DotCalibrationError, DotSample, fit_dot_size,
-    load_dot_calibration, options_for_dot_size, samples_from_journal, save_dot_calibration)
+    load_dot_calibration, samples_from_journal, save_dot_calibration, sized_options)
 from helio_control.plan import load_plan_options, plan_dots
 from helio_control.run_journal import JournalWriter, read_journal
 import numpy as np
@@ -124,10 +124,10 @@ def test_a_plan_burns_and_times_its_dots_by_the_calibration():
     points = np.array([[0.06 + 0.004 * i, 0.08] for i in range(4)])
     options = replace(load_plan_options(), dot_radius=0.0025)
     # the goal's dot_radius: the dot's width, 2.5 mm -> N_p (6.25 - 0.12) / 0.1253 = 49
-    sized = options_for_dot_size(options, calibration)
+    sized = sized_options(options, calibration)[0]
     assert sized.n_p_target == 49 and options.n_p_target == 30
-    assert options_for_dot_size(options, calibration, n_p_given=True).n_p_target == 30
-    assert options_for_dot_size(options, None).n_p_target == 30
+    assert sized_options(options, calibration, n_p_given=True)[0].n_p_target == 30
+    assert sized_options(options, None)[0].n_p_target == 30
     plan = plan_dots(points, sized, dot_size=calibration)
     assert list(plan.n_p_targets) == [49] * 4
     # the first dot alone, each later one 4 mm after the one before: its heat left in the
@@ -222,8 +222,7 @@ def test_the_rows_measured_cooling_replaces_the_cycle_models_in_the_plan():
     assert calibration.cooling(25) == pytest.approx(4.5)
     assert calibration.cooling(30, 20.0) == pytest.approx(7.0)
     points = np.array([[0.06 + 0.004 * i, 0.08] for i in range(3)])
-    options = options_for_dot_size(replace(load_plan_options(), dot_radius=0.0018),
-                                   calibration)
+    options = sized_options(replace(load_plan_options(), dot_radius=0.0018), calibration)[0]
     plan = plan_dots(points, options, dot_size=calibration)
     assert plan.parameters['cycle_model']['cooling_s'] == pytest.approx(
         2.0 + 0.1 * options.n_p_target)

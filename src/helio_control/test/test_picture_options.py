@@ -52,7 +52,7 @@ def test_every_option_has_a_meaning_and_every_number_a_unit():
 def test_dot_radius_says_what_it_is_with_and_without_a_dot_size_calibration():
     text = help_line('dot_radius')
     assert 'pitch' in text and 'dot-size calibration' in text and 'wide' in text
-    assert 'unless n_p_target is given' in text     # options_for_dot_size(n_p_given)
+    assert 'unless n_p_target is given' in text     # sized_options(n_p_given)
 
 
 def yaml_lines():
